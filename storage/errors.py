@@ -1,0 +1,59 @@
+"""The service's one exception tree.
+
+The api maps ``http_status``/``code`` to ``{"error": {"code", "message", "detail"}}``, the worker turns
+any of them into a failed job with ``message``, the CLI into an exit code.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class StorageError(Exception):
+    """Base of every domain error; ``detail`` is optional JSON-able context for the client."""
+
+    code: str = "error"
+    http_status: int = 500
+
+    def __init__(self, message: str, detail: Any = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.detail = detail
+
+    def to_dict(self) -> dict[str, Any]:
+        """The error body the api returns (under the ``"error"`` key)."""
+        return {"code": self.code, "message": self.message, "detail": self.detail}
+
+
+class NotFound(StorageError):
+    code = "not_found"
+    http_status = 404
+
+
+class Conflict(StorageError):
+    """The resource's state forbids the operation (e.g. retrying a running job)."""
+
+    code = "conflict"
+    http_status = 409
+
+
+class InvalidInput(StorageError):
+    code = "invalid_input"
+    http_status = 422
+
+
+class PayloadTooLarge(StorageError):
+    code = "payload_too_large"
+    http_status = 413
+
+
+class Unauthorized(StorageError):
+    code = "unauthorized"
+    http_status = 401
+
+
+class ConfigurationError(StorageError):
+    """The deployment settings are unusable (unknown URL scheme, …): the operator's fault."""
+
+    code = "configuration_error"
+    http_status = 500

@@ -1,0 +1,9 @@
+"""All database queries. Each module holds plain functions taking a ``Session`` first.
+
+Every write commits its own transaction (rolled back on error) and returns fresh objects; ``get`` and
+the list functions always re-read rows, so a long-lived session never serves stale progress.
+"""
+
+from storage.repositories import batches, jobs, metrics, sequences
+
+__all__ = ["batches", "jobs", "metrics", "sequences"]

@@ -1,0 +1,151 @@
+"""Batches: every sequence under every preset, and the comparison table of their results."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from storage.errors import InvalidInput, NotFound
+from storage.models import Batch, Job, RunMetrics, Sequence, new_id
+from storage.repositories import jobs as job_repo
+from storage.repositories._common import check_page, get_or_raise, writing
+
+
+@dataclass(frozen=True, slots=True)
+class ComparisonRow:
+    """One cell group of the comparison table: a sequence run under a preset (None: no result)."""
+
+    sequence_id: str
+    sequence_name: str | None
+    preset: str
+    job_id: str | None
+    status: str | None
+    ate_rmse: float | None
+    rpe_trans_rmse: float | None
+    rpe_rot_rmse: float | None
+    fps: float | None
+
+    def as_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def _unique(items: list[str], what: str) -> list[str]:
+    if not items or not all(isinstance(i, str) and i for i in items):
+        raise InvalidInput(f"{what} must be a non-empty list of non-empty strings")
+    return list(dict.fromkeys(items))  # de-duplicated, order kept
+
+
+def create(
+    session: Session,
+    *,
+    sequence_ids: list[str],
+    presets: list[str],
+    name: str = "",
+    config: dict[str, Any] | None = None,
+) -> Batch:
+    """The batch and its queued jobs (one per sequence × preset), in one transaction.
+
+    ``config`` overrides go to every job. The caller enqueues ``jobs_of(batch.id)`` afterwards.
+    """
+    sequence_ids = _unique(sequence_ids, "sequence_ids")
+    presets = _unique(presets, "presets")
+    with writing(session):
+        found = set(session.scalars(select(Sequence.id).where(Sequence.id.in_(sequence_ids))))
+        missing = [s for s in sequence_ids if s not in found]
+        if missing:
+            raise NotFound(f"unknown sequences: {', '.join(missing)}", {"missing": missing})
+        batch = Batch(id=new_id(), name=name, sequence_ids=sequence_ids, presets=presets)
+        session.add(batch)
+        session.flush()  # the batch row first: the jobs reference it
+        session.add_all(
+            job_repo.new_job(sequence_id=s, preset=p, config=config, batch_id=batch.id)
+            for s in sequence_ids
+            for p in presets
+        )
+    return batch
+
+
+def get(session: Session, batch_id: str) -> Batch:
+    return get_or_raise(session, Batch, batch_id, "batch")
+
+
+def list_batches(session: Session, *, limit: int = 50, offset: int = 0) -> list[Batch]:
+    """Newest first."""
+    check_page(limit, offset)
+    stmt = (
+        select(Batch)
+        .order_by(Batch.created_at.desc(), Batch.id)
+        .limit(limit)
+        .offset(offset)
+        .execution_options(populate_existing=True)
+    )
+    return list(session.scalars(stmt))
+
+
+def jobs_of(session: Session, batch_id: str) -> list[Job]:
+    """The batch's jobs in table order: by sequence, then preset, as given at creation."""
+    batch = get(session, batch_id)
+    jobs = session.scalars(
+        select(Job)
+        .where(Job.batch_id == batch_id)
+        .order_by(Job.created_at, Job.id)
+        .execution_options(populate_existing=True)
+    ).all()
+    order = _order(batch)
+    return sorted(jobs, key=lambda j: order.get((j.sequence_id, j.preset), (len(order), 0)))
+
+
+def _order(batch: Batch) -> dict[tuple[str, str], tuple[int, int]]:
+    return {
+        (s, p): (i, k)
+        for i, s in enumerate(batch.sequence_ids)
+        for k, p in enumerate(batch.presets)
+    }
+
+
+def comparison(session: Session, batch_id: str) -> list[ComparisonRow]:
+    """One row per sequence × preset of the batch, in creation order; metrics None until known.
+
+    If a cell somehow has several jobs, the newest one wins; a deleted sequence's cells stay, empty.
+    """
+    batch = get(session, batch_id)
+    stmt = (
+        select(
+            Job.id,
+            Job.sequence_id,
+            Job.preset,
+            Job.status,
+            RunMetrics.ate_rmse,
+            RunMetrics.rpe_trans_rmse,
+            RunMetrics.rpe_rot_rmse,
+            RunMetrics.fps,
+        )
+        .outerjoin(RunMetrics, RunMetrics.job_id == Job.id)
+        .where(Job.batch_id == batch_id)
+        .order_by(Job.created_at, Job.id)
+    )
+    cells = {(r.sequence_id, r.preset): r for r in session.execute(stmt)}
+    names_stmt = select(Sequence.id, Sequence.name).where(Sequence.id.in_(batch.sequence_ids))
+    names = {sid: name for sid, name in session.execute(names_stmt)}
+    rows = []
+    for seq_id in batch.sequence_ids:
+        for preset in batch.presets:
+            r = cells.get((seq_id, preset))
+            rows.append(
+                ComparisonRow(
+                    sequence_id=seq_id,
+                    sequence_name=names.get(seq_id),
+                    preset=preset,
+                    job_id=r.id if r else None,
+                    status=r.status.value if r else None,
+                    ate_rmse=r.ate_rmse if r else None,
+                    rpe_trans_rmse=r.rpe_trans_rmse if r else None,
+                    rpe_rot_rmse=r.rpe_rot_rmse if r else None,
+                    fps=r.fps if r else None,
+                )
+            )
+    return rows

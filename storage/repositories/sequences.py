@@ -1,0 +1,75 @@
+"""Sequences: the RGB-D recordings jobs run on."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import delete as sql_delete
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from storage.models import Job, Sequence, new_id
+from storage.repositories._common import check_page, get_or_raise, writing
+
+
+def create(
+    session: Session,
+    *,
+    name: str,
+    path: str,
+    frames: int = 0,
+    duration_s: float = 0.0,
+    has_groundtruth: bool = False,
+    camera: dict[str, Any] | None = None,
+    size_bytes: int = 0,
+    meta: dict[str, Any] | None = None,
+    id: str | None = None,
+) -> Sequence:
+    """Record a sequence already in place; ``id`` may be chosen first to name its directory."""
+    seq = Sequence(
+        id=id or new_id(),
+        name=name,
+        path=path,
+        frames=frames,
+        duration_s=duration_s,
+        has_groundtruth=has_groundtruth,
+        camera=camera or {},
+        size_bytes=size_bytes,
+        meta=meta or {},
+    )
+    with writing(session):
+        session.add(seq)
+    return seq
+
+
+def get(session: Session, sequence_id: str) -> Sequence:
+    return get_or_raise(session, Sequence, sequence_id, "sequence")
+
+
+def list_sequences(session: Session, *, limit: int = 50, offset: int = 0) -> list[Sequence]:
+    """Newest first."""
+    check_page(limit, offset)
+    stmt = (
+        select(Sequence)
+        .order_by(Sequence.created_at.desc(), Sequence.id)
+        .limit(limit)
+        .offset(offset)
+        .execution_options(populate_existing=True)
+    )
+    return list(session.scalars(stmt))
+
+
+def count(session: Session) -> int:
+    return session.scalar(select(func.count()).select_from(Sequence)) or 0
+
+
+def delete(session: Session, sequence_id: str) -> list[str]:
+    """Delete the sequence and (by cascade) its jobs, metrics and frame stats.
+
+    Returns the deleted jobs' ids so the caller can remove their artifacts and files.
+    """
+    with writing(session):
+        get(session, sequence_id)
+        job_ids = list(session.scalars(select(Job.id).where(Job.sequence_id == sequence_id)))
+        session.execute(sql_delete(Sequence).where(Sequence.id == sequence_id))
+    return job_ids

@@ -1,0 +1,61 @@
+"""Deployment settings (paths, URLs, tokens, limits), read from ``VTD_*`` environment variables.
+
+Built by :func:`get_settings`, never at import time, so tests and processes each get their own.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+GIB = 1024**3
+
+
+class Settings(BaseSettings):
+    """One process's deployment configuration; the embedded default needs none of it set."""
+
+    model_config = SettingsConfigDict(env_prefix="VTD_", extra="forbid")
+
+    data_dir: Path = Path("data")
+    """Local data directory: SQLite database, queue file, sequences, artifacts, upload staging."""
+    database_url: str | None = None
+    """SQLAlchemy URL; None means SQLite in ``data_dir``. ``postgresql://…`` when scaled out."""
+    queue_url: str | None = None
+    """None means a huey SQLite file in ``data_dir``; ``redis://…`` when scaled out."""
+    api_token: str | None = Field(default=None, repr=False)
+    """Bearer token the api requires when set (kept out of repr so it never lands in logs)."""
+    shared_dir: Path = Path("../shared")
+    """Read-only real data (datasets, weights) shared between checkouts."""
+    import_root: Path | None = None
+    """Server folder below which sequences may be registered in place; None disables it."""
+
+    max_upload_bytes: int = Field(default=4 * GIB, gt=0)
+    max_files: int = Field(default=200_000, gt=0)
+    max_ratio: float = Field(default=200.0, gt=0)
+    """Largest unpacked/packed size ratio accepted for an archive (zip-bomb guard)."""
+
+    host: str = "127.0.0.1"
+    port: int = Field(default=8000, ge=1, le=65535)
+    viewer_port: int = Field(default=8080, ge=1, le=65535)
+    heartbeat_timeout_s: float = Field(default=120.0, gt=0)
+    """A running job whose worker has not reported for this long is failed (workers check every 1/4 of it)."""
+
+    @property
+    def resolved_database_url(self) -> str:
+        """The database URL to connect to: ``database_url`` or SQLite in ``data_dir``."""
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{self.data_dir / 'vtdslam.db'}"
+
+    @property
+    def queue_path(self) -> Path:
+        """The huey SQLite file used when no ``queue_url`` is set."""
+        return self.data_dir / "queue.db"
+
+
+def get_settings(**overrides: Any) -> Settings:
+    """Settings from the environment; keyword ``overrides`` win over it (tests, CLI flags)."""
+    return Settings(**overrides)
