@@ -1,0 +1,1 @@
+"""The pure SLAM pipeline: knows nothing of databases or the web (imports none of our other packages)."""

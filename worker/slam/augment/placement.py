@@ -1,0 +1,95 @@
+"""Where the inserted people walk: straight, eased strolls on the floor that cross the camera's view.
+
+Each walk lasts a few seconds. It starts just outside one side of the view at the start frame and ends just
+outside the other side at the end frame, at a distance in front of the camera chosen from the real scene depth
+(so the person is mostly in front of the furniture, sometimes behind a counter). People take turns: walker k's
+walks are shifted by a fraction of a walk so that one or two are usually in view.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from worker.slam.augment.floor import Floor
+from worker.slam.camera import Camera
+
+
+@dataclass(frozen=True)
+class PlacementConfig:
+    """How people walk through the real scene."""
+
+    walk_s: tuple[float, float] = (5.0, 8.0)
+    """Duration range of one walk across the view (seconds)."""
+    depth_fraction: tuple[float, float] = (0.6, 0.9)
+    """Distance as a fraction of the median scene depth in the middle of the view."""
+    distance_m: tuple[float, float] = (1.4, 3.2)
+    """Clamp of that distance (metres)."""
+    height_m: tuple[float, float] = (1.6, 1.85)
+    """Height of the people (metres)."""
+    overshoot: float = 1.25
+    """Start/end lateral offset as a multiple of the half view width at that distance (> 1: off screen)."""
+
+
+@dataclass(frozen=True)
+class Walk:
+    """One walk of sprite `sprite` from floor point `start` (3,) to `end` (3,) over frames `first`..`last`."""
+
+    walker: int
+    sprite: int
+    first: int
+    last: int
+    start: np.ndarray
+    end: np.ndarray
+    height: float
+
+    def position(self, frame: int) -> np.ndarray:
+        """Floor point under the person at `frame` (smooth start and stop)."""
+        s = (frame - self.first) / max(self.last - self.first, 1)
+        s = 0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0.0, 1.0))
+        return self.start + s * (self.end - self.start)
+
+    def bob(self, frame: int, step_m: float = 0.7, amplitude_m: float = 0.02) -> float:
+        """Vertical bounce (m) of a walking body: highest mid-step, one bounce per `step_m` walked."""
+        walked = float(np.linalg.norm(self.position(frame) - self.start))
+        return amplitude_m * abs(np.sin(np.pi * walked / step_m))
+
+
+def _anchor(T_WC: np.ndarray, floor: Floor, distance: float, lateral: float) -> np.ndarray:
+    """Floor point `distance` m ahead of the camera (horizontally) and `lateral` m to its right."""
+    fwd = T_WC[:3, 2] - (T_WC[:3, 2] @ floor.up) * floor.up
+    fwd /= max(np.linalg.norm(fwd), 1e-9)
+    right = np.cross(fwd, floor.up)  # camera x (right) for an upright camera with y down
+    return floor.project(T_WC[:3, 3] + distance * fwd + lateral * right)
+
+
+def plan_walks(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera: Camera, people: int,
+               n_sprites: int, fps: float, rng: np.random.Generator,
+               cfg: PlacementConfig = PlacementConfig()) -> list[Walk]:
+    """Walks covering the whole sequence: `poses` (N, 4, 4) T_WC, `center_depth` (N,) median depth (m) of the
+    middle of each frame (0 = unknown), `people` walkers taking turns."""
+    n = len(poses)
+    half_fov = camera.width / 2 / camera.fx  # tan of the half horizontal field of view
+    known = center_depth[center_depth > 0]
+    fallback = float(np.median(known)) if len(known) else 2.5
+    walks: list[Walk] = []
+    for k in range(people):
+        frame = -int(rng.uniform(0, 1) * cfg.walk_s[1] * fps * k / max(people, 1))
+        while frame < n:
+            length = int(rng.uniform(*cfg.walk_s) * fps)
+            first, last = frame, frame + length
+            a, b = max(first, 0), min(last, n - 1)
+            if b - a >= min(fps, n // 2):  # skip slivers at the ends of the sequence
+                mid_depth = center_depth[a:b + 1]
+                mid_depth = float(np.median(mid_depth[mid_depth > 0])) if (mid_depth > 0).any() else fallback
+                dist = float(np.clip(rng.uniform(*cfg.depth_fraction) * mid_depth, *cfg.distance_m))
+                side = 1.0 if rng.random() < 0.5 else -1.0
+                off = cfg.overshoot * half_fov * dist
+                # Start and end are placed against the camera pose at the clipped ends of the walk, so the
+                # person crosses the view even while the camera pans.
+                start = _anchor(poses[a], floor, dist, -side * off)
+                end = _anchor(poses[b], floor, dist, side * off)
+                walks.append(Walk(k + 1, int(rng.integers(n_sprites)), a, b, start, end,
+                                  float(rng.uniform(*cfg.height_m))))
+            frame = last + int(rng.uniform(0.0, 1.0) * fps)
+    return walks

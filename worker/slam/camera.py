@@ -1,0 +1,129 @@
+"""Pinhole RGB-D camera model and the named presets of the supported datasets."""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from worker.slam.errors import CameraError
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Intrinsics of a registered RGB-D pair.
+
+    Depth PNG value / `depth_scale` = metres (TUM, Bonn: 5000; 7-Scenes: 1000).
+    `dist` are OpenCV coefficients (k1, k2, p1, p2, k3) of the colour image.
+    """
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    depth_scale: float = 5000.0
+    width: int = 640
+    height: int = 480
+    dist: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    name: str = "custom"
+
+    def __post_init__(self) -> None:
+        vals = (self.fx, self.fy, self.cx, self.cy, self.depth_scale)
+        if not all(np.isfinite(v) and v > 0 for v in vals):
+            raise CameraError(f"camera values must be finite and positive, got fx, fy, cx, cy, scale = {vals}")
+        if self.width <= 0 or self.height <= 0:
+            raise CameraError(f"camera size must be positive, got {self.width}x{self.height}")
+        if len(self.dist) != 5:
+            raise CameraError(f"dist needs 5 coefficients (k1 k2 p1 p2 k3), got {len(self.dist)}")
+
+    @property
+    def K(self) -> np.ndarray:
+        """3x3 float64 intrinsic matrix."""
+        return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1.0]])
+
+    @property
+    def has_distortion(self) -> bool:
+        return any(abs(d) > 0 for d in self.dist)
+
+    def scaled(self, width: int, height: int) -> "Camera":
+        """The same camera at another image size (e.g. a different sensor resolution)."""
+        sx, sy = width / self.width, height / self.height
+        return replace(self, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy,
+                       width=width, height=height)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["dist"] = list(self.dist)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Camera":
+        known = {f for f in cls.__dataclass_fields__}
+        unknown = set(d) - known
+        if unknown:
+            raise CameraError(f"unknown camera fields: {sorted(unknown)}")
+        try:
+            kw = dict(d)
+            if "dist" in kw:
+                dist = [float(x) for x in kw["dist"]]
+                if len(dist) == 4:  # k1 k2 p1 p2 without k3
+                    dist.append(0.0)
+                kw["dist"] = tuple(dist)
+            for k in ("fx", "fy", "cx", "cy", "depth_scale"):
+                if k in kw:
+                    kw[k] = float(kw[k])
+            for k in ("width", "height"):
+                if k in kw:
+                    kw[k] = int(kw[k])
+            return cls(**kw)
+        except (TypeError, ValueError) as exc:
+            raise CameraError(f"invalid camera: {exc}") from exc
+
+
+PRESETS: dict[str, Camera] = {
+    # TUM RGB-D (https://cvg.cit.tum.de/data/datasets/rgbd-dataset/file_formats): ROS-default registered depth.
+    "tum1": Camera(517.3, 516.5, 318.6, 255.3, 5000.0, dist=(0.2624, -0.9531, -0.0054, 0.0026, 1.1633), name="tum1"),
+    "tum2": Camera(520.9, 521.0, 325.1, 249.7, 5000.0, dist=(0.2312, -0.7849, -0.0033, -0.0001, 0.9172), name="tum2"),
+    "tum3": Camera(535.4, 539.2, 320.1, 247.6, 5000.0, name="tum3"),
+    # Bonn RGB-D Dynamic (its documented intrinsics; k3 not given).
+    "bonn": Camera(542.822841, 542.576870, 315.593520, 237.756098, 5000.0,
+                   dist=(0.039903, -0.099343, -0.000730, -0.000144, 0.0), name="bonn"),
+    # Microsoft 7-Scenes nominal depth intrinsics; depth in millimetres.
+    "7scenes": Camera(585.0, 585.0, 320.0, 240.0, 1000.0, name="7scenes"),
+}
+
+CAMERA_FILE = "camera.json"
+
+
+def camera_from_preset(name: str) -> Camera:
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise CameraError(f"unknown camera preset {name!r}; choose one of {sorted(PRESETS)}") from None
+
+
+def parse_camera(spec: str | dict) -> Camera:
+    """A preset name, a JSON object string, or a dict of explicit intrinsics."""
+    if isinstance(spec, dict):
+        return Camera.from_dict(spec)
+    text = spec.strip()
+    if text.startswith("{"):
+        try:
+            return Camera.from_dict(json.loads(text))
+        except json.JSONDecodeError as exc:
+            raise CameraError(f"camera is not valid JSON: {exc}") from exc
+    return camera_from_preset(text)
+
+
+def load_camera_file(folder: Path) -> Camera | None:
+    """The sequence's own `camera.json`, if it has one."""
+    path = Path(folder) / CAMERA_FILE
+    if not path.is_file():
+        return None
+    try:
+        return Camera.from_dict(json.loads(path.read_text()))
+    except json.JSONDecodeError as exc:
+        raise CameraError(f"{path}: not valid JSON: {exc}") from exc
+    except CameraError as exc:
+        raise CameraError(f"{path}: {exc.message}") from exc

@@ -1,0 +1,1 @@
+"""Dynamic object culling (paper 4.1): epipolar geometry with an adaptive, entropy-guided threshold."""

@@ -1,0 +1,195 @@
+"""Decide which objects move between the previous and the current frame, and which pixels to exclude.
+
+Per match, the motion score is its distance to the epipolar line of a fundamental matrix fitted to the matches
+outside potentially dynamic segments; where the previous frame has depth, also its reprojection error under
+the relative pose from PnP (this catches motion *along* the epipolar line, which F cannot see). An object is
+dynamic when the median score of its points exceeds the adaptive threshold Δd = f(H); all its pixels (dilated)
+are then excluded. A still object of a dynamic class (a sitting person) keeps its features. Without segmentation
+(or for objects no class covers) clusters of high-score points with consistent depth become dynamic regions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from worker.slam.dynamic.epipolar import epipolar_distance, fundamental_ransac, match_orb
+from worker.slam.dynamic.segments import split_segments
+from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy
+
+
+@dataclass(frozen=True)
+class CullingConfig:
+    """Dynamic culling of one frame against the previous one."""
+
+    threshold: ThresholdConfig = field(default_factory=ThresholdConfig)
+    use_segmentation: bool = True
+    """False = the `geometry-only` preset: no segments, only clusters of moving points."""
+    detect_unknown: bool = False
+    """With segmentation, also flag moving clusters no segment covers (the geometry-only path always does).
+    Off by default: on synthetic truth the cluster path finds few moving points (features on walking people
+    rarely match across frames) and removes static ones too."""
+    ransac_px: float = 1.0
+    """RANSAC inlier threshold of the fundamental matrix (pixels)."""
+    match_max_distance: int = 50
+    """Hamming distance above which ORB matches are dropped."""
+    use_depth: bool = True
+    """Add the reprojection test with the previous frame's depth."""
+    pnp_px: float = 2.0
+    """RANSAC threshold of the depth test's PnP; wider lets a wrong motion explain a moving object too."""
+    reprojection_scale: float = 3.0
+    """A reprojection error counts as `error / scale` epipolar pixels (depth noise is larger than keypoint noise)."""
+    min_points: int = 3
+    """A segment needs this many matched points to be judged by geometry."""
+    undecided_dynamic: bool = True
+    """A potentially dynamic segment with too few matched points to judge is treated as dynamic (safe side:
+    a person's features rarely match across frames when they walk)."""
+    segment_quantile: float = 0.5
+    """A segment is dynamic when this quantile of its points' scores exceeds Δd (robust to a few bad matches)."""
+    min_segment_area: int = 200
+    depth_jump: float = 0.05
+    """Relative depth jump that separates two segments."""
+    cluster_cell: int = 24
+    """Grid cell (pixels) for clustering moving points in the geometry path."""
+    cluster_min_points: int = 4
+    cluster_depth_tol: float = 0.25
+    """Pixels within this (relative) depth of a cluster's median depth belong to the moving region."""
+    dilation_px: int = 3
+    """The exclude mask is the dynamic mask dilated by this many pixels (keypoints sit on object borders)."""
+
+
+@dataclass(frozen=True)
+class SegmentDecision:
+    label: int
+    kind: str  # "semantic" or "geometric"
+    points: int
+    score: float
+    dynamic: bool
+
+
+@dataclass(frozen=True)
+class CullingResult:
+    """`dynamic_mask` / `exclude_mask` bool (H, W); per-match `scores` (N,) and `cur_points` (N, 2) px."""
+
+    dynamic_mask: np.ndarray
+    exclude_mask: np.ndarray
+    segments: list[SegmentDecision]
+    threshold_px: float
+    entropy: float | None
+    matches: int
+    scores: np.ndarray
+    cur_points: np.ndarray
+
+    def removed(self, keypoints_xy: np.ndarray) -> np.ndarray:
+        """bool (M,): which of the current frame's keypoints (M, 2) fall in the excluded region."""
+        if len(keypoints_xy) == 0:
+            return np.zeros(0, bool)
+        h, w = self.exclude_mask.shape
+        x = np.clip(np.round(keypoints_xy[:, 0]).astype(int), 0, w - 1)
+        y = np.clip(np.round(keypoints_xy[:, 1]).astype(int), 0, h - 1)
+        return self.exclude_mask[y, x]
+
+
+def _scores(p_prev, p_cur, static, prev_depth, K, config) -> np.ndarray:
+    """Motion score (N,) in epipolar pixels; inf-free, 0 where nothing could be measured."""
+    F = fundamental_ransac(p_prev[static], p_cur[static], config.ransac_px)
+    if F is None:
+        return np.zeros(len(p_prev))
+    score = epipolar_distance(F, p_prev, p_cur)
+    if config.use_depth and prev_depth is not None and K is not None:
+        h, w = prev_depth.shape
+        xi = np.clip(np.round(p_prev[:, 0]).astype(int), 0, w - 1)
+        yi = np.clip(np.round(p_prev[:, 1]).astype(int), 0, h - 1)
+        z = prev_depth[yi, xi]
+        has = z > 0
+        usable = has & static
+        if usable.sum() >= 6:
+            X = np.stack([(p_prev[:, 0] - K[0, 2]) / K[0, 0] * z, (p_prev[:, 1] - K[1, 2]) / K[1, 1] * z, z], 1)
+            ok, rvec, tvec, inl = cv2.solvePnPRansac(X[usable], p_cur[usable].astype(np.float64), K, None,
+                                                     reprojectionError=config.pnp_px,
+                                                     iterationsCount=300, flags=cv2.SOLVEPNP_SQPNP)
+            if ok and inl is not None and len(inl) >= 6:
+                proj, _ = cv2.projectPoints(X[has], rvec, tvec, K, None)
+                err = np.linalg.norm(proj.reshape(-1, 2) - p_cur[has], axis=1)
+                score[has] = np.maximum(score[has], err / config.reprojection_scale)
+    return score
+
+
+def _geometric_clusters(p_cur, moving, depth, covered, config) -> list[np.ndarray]:
+    """Regions (bool masks) around clusters of moving points with consistent depth, outside `covered`."""
+    h, w = depth.shape
+    c = config.cluster_cell
+    gh, gw = (h + c - 1) // c, (w + c - 1) // c
+    cell = (np.clip(p_cur[:, 1] // c, 0, gh - 1).astype(int), np.clip(p_cur[:, 0] // c, 0, gw - 1).astype(int))
+    grid = np.zeros((gh, gw), np.uint8)
+    sel = moving & ~covered
+    grid[cell[0][sel], cell[1][sel]] = 1
+    n, lab = cv2.connectedComponents(cv2.dilate(grid, np.ones((3, 3), np.uint8)), connectivity=8)
+    regions = []
+    point_lab = lab[cell]
+    for k in range(1, n):
+        in_k = point_lab == k
+        mov_k = in_k & sel
+        if mov_k.sum() < config.cluster_min_points or mov_k.sum() < 0.5 * in_k.sum():
+            continue  # a few outliers among many static points: noise, not an object
+        xi = np.clip(np.round(p_cur[mov_k, 0]).astype(int), 0, w - 1)
+        yi = np.clip(np.round(p_cur[mov_k, 1]).astype(int), 0, h - 1)
+        zs = depth[yi, xi]
+        zs = zs[zs > 0]
+        ys, xs = np.nonzero(cv2.resize((lab == k).astype(np.uint8), (gw * c, gh * c),
+                                       interpolation=cv2.INTER_NEAREST)[:h, :w])
+        region = np.zeros((h, w), bool)
+        region[ys, xs] = True
+        if len(zs):
+            zmed = float(np.median(zs))
+            region &= np.abs(depth - zmed) < config.cluster_depth_tol * zmed
+        regions.append(region)
+    return regions
+
+
+def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, desc_cur: np.ndarray,
+               depth_cur: np.ndarray, potentially_dynamic: np.ndarray | None, pose_cov: np.ndarray | None,
+               config: CullingConfig = CullingConfig(), prev_depth: np.ndarray | None = None,
+               K: np.ndarray | None = None) -> CullingResult:
+    """Judge the objects of the current frame.
+
+    `kp_*` (N, 2) pixel coordinates (x, y) with ORB `desc_*` (N, 32) uint8; `depth_cur` float32 m (H, W);
+    `potentially_dynamic` bool (H, W) from segmentation (None in geometry-only mode); `pose_cov` the 6x6
+    covariance of the previous pose estimate (for Δd); `prev_depth` + `K` enable the reprojection test.
+    """
+    h, w = depth_cur.shape
+    entropy = motion_entropy(pose_cov)
+    thr = adaptive_threshold(entropy, config.threshold)
+    m = match_orb(desc_prev, desc_cur, config.match_max_distance)
+    p_prev, p_cur = kp_prev[m.prev_idx].astype(np.float64), kp_cur[m.cur_idx].astype(np.float64)
+    xi = np.clip(np.round(p_cur[:, 0]).astype(int), 0, w - 1)
+    yi = np.clip(np.round(p_cur[:, 1]).astype(int), 0, h - 1)
+    use_sem = config.use_segmentation and potentially_dynamic is not None
+    labels = split_segments(potentially_dynamic, depth_cur, config.min_segment_area, config.depth_jump) \
+        if use_sem else np.zeros((h, w), np.int32)
+    point_label = labels[yi, xi]
+    scores = _scores(p_prev, p_cur, point_label == 0, prev_depth, K, config) if len(p_prev) >= 8 \
+        else np.zeros(len(p_prev))
+    dynamic = np.zeros((h, w), bool)
+    decisions = []
+    for lab in range(1, int(labels.max()) + 1):
+        s = scores[point_label == lab]
+        if len(s) < config.min_points:
+            moving = config.undecided_dynamic
+        else:
+            moving = float(np.quantile(s, config.segment_quantile)) > thr
+        decisions.append(SegmentDecision(lab, "semantic", len(s), float(np.median(s)) if len(s) else 0.0, moving))
+        if moving:
+            dynamic |= labels == lab
+    if config.detect_unknown or not use_sem:
+        moving_pts = scores > thr
+        for k, region in enumerate(_geometric_clusters(p_cur, moving_pts, depth_cur, point_label > 0,
+                                                       config)):
+            inside = region[yi, xi]
+            decisions.append(SegmentDecision(-(k + 1), "geometric", int(inside.sum()),
+                                             float(np.median(scores[inside])) if inside.any() else 0.0, True))
+            dynamic |= region
+    k = 2 * config.dilation_px + 1
+    exclude = cv2.dilate(dynamic.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
+    return CullingResult(dynamic, exclude, decisions, thr, entropy, len(p_prev), scores, p_cur)

@@ -1,0 +1,115 @@
+"""Pipeline stages of the dynamic front end: segmentation → culling (→ restoration, in inpainting/stage.py).
+
+The culling stage extracts the frame's ORB features once (the tracker reuses them), judges the objects against
+the previous frame and hands the tracker the features outside moving objects plus an exclude mask.
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections import deque
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from worker.slam.camera import Camera
+from worker.slam.dynamic.culling import CullingConfig, cull_frame
+from worker.slam.features.types import Features
+from worker.slam.io.sequence import Frame
+from worker.slam.segmentation.base import SegmenterConfig, make_segmenter
+from worker.slam.truth import TruthScores
+
+
+@dataclass
+class SegmentationStageConfig:
+    """Which network marks potentially dynamic pixels."""
+
+    segmenter: SegmenterConfig = field(default_factory=lambda: SegmenterConfig(threads=1))
+    """One inference thread by default: on a shared 2-core CPU two torch threads ran ~10x slower."""
+
+
+@dataclass
+class CullingStageConfig:
+    """Dynamic culling against the previous frame."""
+
+    culling: CullingConfig = field(default_factory=CullingConfig)
+    lag_frames: int = 10
+    """Compare with the frame this many frames back (the previous one at the start). Slow movers are the hard
+    case: on the augmented-real sequence people move a median 1.3 px between consecutive frames (static points:
+    0.6 px), 6.3 px over 10 frames (static: 1.0 px), so a longer baseline separates them."""
+
+
+class SegmentationStage:
+    name = "segmentation"
+
+    def __init__(self, config, camera: Camera) -> None:
+        self.segmenter = make_segmenter(config.section("segmentation").segmenter)
+
+    def process(self, frame: Frame, inputs, ctx):
+        mask = self.segmenter.segment(frame.rgb).dynamic_mask()
+        inputs.potentially_dynamic = mask
+        inputs.info["potentially_dynamic_fraction"] = float(mask.mean())
+        return inputs
+
+
+class CullingStage:
+    name = "culling"
+
+    def __init__(self, config, camera: Camera) -> None:
+        self.cfg: CullingStageConfig = config.section("culling")
+        self.use_segmentation = "segmentation" in config.stages
+        self.camera = camera
+        self.history: deque[tuple[Features, np.ndarray]] = deque(maxlen=max(1, self.cfg.lag_frames))
+        self.scores: TruthScores | None = None
+        self.removed_total = self.kept_total = 0
+        self.last = None  # this frame's CullingResult, None when nothing was compared (bench/plot_culling.py)
+
+    def process(self, frame: Frame, inputs, ctx):
+        if self.scores is None and ctx.truth is not None:
+            self.scores = TruthScores(ctx.truth)
+        self.last = None
+        gray = cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY)
+        feats = ctx.tracker.extractor.extract(gray, frame.depth)
+        removed = np.zeros(len(feats), bool)
+        if self.history and len(feats):
+            prev_feats, prev_depth = self.history[0]  # the oldest kept: `lag_frames` back
+            last = ctx.tracker.last_result
+            cov = last.covariance if last is not None else None
+            cfg = self.cfg.culling
+            if not self.use_segmentation:
+                cfg = dataclasses.replace(cfg, use_segmentation=False)
+            res = cull_frame(prev_feats.uv, prev_feats.desc, feats.uv, feats.desc, frame.depth,
+                             inputs.potentially_dynamic if self.use_segmentation else None, cov, cfg,
+                             prev_depth, self.camera.K)
+            removed = res.removed(feats.uv)
+            self.last = res
+            inputs.exclude_mask = res.exclude_mask
+            inputs.dynamic_mask = res.dynamic_mask
+            inputs.info.update(dynamic_fraction=float(res.dynamic_mask.mean()), threshold_px=res.threshold_px,
+                               dynamic_segments=sum(s.dynamic for s in res.segments),
+                               segments=len(res.segments))
+            if res.entropy is not None:
+                inputs.info["motion_entropy"] = res.entropy
+            if self.scores is not None and frame.index < len(ctx.truth):
+                self.scores.add_mask(frame.index, res.dynamic_mask)
+                self.scores.add_features(frame.index, feats.uv[removed], feats.uv[~removed])
+        elif self.use_segmentation and inputs.potentially_dynamic is not None and len(feats):
+            # Nothing to compare with yet (first frame): keep potentially dynamic objects out of the new map.
+            k = 2 * self.cfg.culling.dilation_px + 1
+            inputs.exclude_mask = cv2.dilate(inputs.potentially_dynamic.astype(np.uint8), np.ones((k, k))) > 0
+            inputs.dynamic_mask = inputs.potentially_dynamic
+            h, w = frame.depth.shape
+            removed = inputs.exclude_mask[np.clip(np.rint(feats.uv[:, 1]).astype(int), 0, h - 1),
+                                          np.clip(np.rint(feats.uv[:, 0]).astype(int), 0, w - 1)]
+        inputs.features = feats.select(~removed)
+        inputs.info.update(features_removed=int(removed.sum()), features_kept=int((~removed).sum()))
+        self.removed_total += int(removed.sum())
+        self.kept_total += int((~removed).sum())
+        self.history.append((feats, frame.depth))
+        return inputs
+
+    def summary(self) -> dict:
+        out = {"features_removed": self.removed_total, "features_kept": self.kept_total}
+        if self.scores is not None:
+            out["truth"] = {k: v for k, v in self.scores.summary().items() if k != "restoration_psnr"}
+        return out

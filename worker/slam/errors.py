@@ -1,0 +1,53 @@
+"""The pipeline's exception tree. Converted to a failed job in the worker and an exit code in the CLI."""
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class SlamError(Exception):
+    """Root of every error the pipeline raises on purpose. `code` is stable and machine-readable."""
+
+    code = "slam_error"
+
+    def __init__(self, message: str, *, detail: dict | None = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.detail = detail or {}
+
+
+class SequenceFormatError(SlamError):
+    """A sequence folder or one of its files is malformed. Names the file and, where known, the line."""
+
+    code = "invalid_sequence"
+
+    def __init__(self, message: str, *, path: Path | str | None = None, line: int | None = None) -> None:
+        where = ""
+        if path is not None:
+            where = f"{path}:{line}: " if line is not None else f"{path}: "
+        super().__init__(where + message, detail={"path": str(path) if path else None, "line": line})
+        self.path = path
+        self.line = line
+
+
+class TrajectoryFormatError(SequenceFormatError):
+    """A TUM trajectory file is malformed."""
+
+    code = "invalid_trajectory"
+
+
+class CameraError(SlamError):
+    """Unknown camera preset or invalid intrinsics."""
+
+    code = "invalid_camera"
+
+
+class ConfigError(SlamError):
+    """A pipeline configuration value is invalid."""
+
+    code = "invalid_config"
+
+
+class EvaluationError(SlamError):
+    """Trajectories cannot be compared (e.g. too few associated poses)."""
+
+    code = "evaluation_failed"

@@ -1,0 +1,84 @@
+"""Reference-frame selection (paper 4.2): enough shared information with the target and enough motion."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ReferenceSelectionConfig:
+    """How the reference library of a target frame is chosen."""
+
+    window: int = 15
+    """Candidates are the frames up to `window` before (and, offline, after) the target."""
+    online: bool = True
+    """Online: past frames only (the live pipeline). Offline: both sides."""
+    min_match_ratio: float = 0.15
+    """Information test: ORB matches with the target / target's features."""
+    min_translation_m: float = 0.01
+    """Motion test τ: camera displacement to the target."""
+    min_rotation_deg: float = 0.5
+    """Motion test γ: camera rotation to the target."""
+    min_refs: int = 2
+    max_refs: int = 4
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A frame that may serve as a reference: its index, pose T_WC (4x4) and ORB descriptors (M, 32) uint8."""
+
+    index: int
+    T_WC: np.ndarray
+    descriptors: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Selection:
+    indices: list[int]
+    match_ratio: dict[int, float]
+    relaxed: bool
+    """True when fewer than `min_refs` passed both tests and the best informative frames were taken anyway."""
+
+
+def relative_motion(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
+    """(translation m, rotation deg) between two camera poses T_WC."""
+    T = np.linalg.inv(T_a) @ T_b
+    cos = np.clip((np.trace(T[:3, :3]) - 1) / 2, -1.0, 1.0)
+    return float(np.linalg.norm(T[:3, 3])), float(np.degrees(np.arccos(cos)))
+
+
+def match_ratio(desc_target: np.ndarray | None, desc_cand: np.ndarray | None) -> float:
+    """Cross-checked Hamming matches / target features (the paper's information estimate)."""
+    if desc_target is None or desc_cand is None or len(desc_target) == 0 or len(desc_cand) == 0:
+        return 0.0
+    matches = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True).match(desc_target, desc_cand)
+    good = sum(1 for m in matches if m.distance < 64)
+    return good / len(desc_target)
+
+
+def select_references(target: Candidate, candidates: list[Candidate],
+                      config: ReferenceSelectionConfig = ReferenceSelectionConfig()) -> Selection:
+    """Pick 2-4 references: informative (match ratio) and displaced (Δp > τ and Δθ > γ), best score first.
+
+    Score = match ratio × (1 + translation / τ): shared content matters, and more baseline shows more of the
+    background behind a moving object.
+    """
+    lo = target.index - config.window
+    hi = target.index if config.online else target.index + config.window
+    scored = []
+    for c in candidates:
+        if c.index == target.index or not lo <= c.index <= hi:
+            continue
+        ratio = match_ratio(target.descriptors, c.descriptors)
+        if ratio < config.min_match_ratio:
+            continue
+        dt, dr = relative_motion(target.T_WC, c.T_WC)
+        moved = dt >= config.min_translation_m and dr >= config.min_rotation_deg
+        scored.append((moved, ratio * (1 + dt / config.min_translation_m), c.index, ratio))
+    scored.sort(key=lambda s: (s[0], s[1]), reverse=True)
+    passing = [s for s in scored if s[0]]
+    relaxed = len(passing) < config.min_refs
+    chosen = (scored if relaxed else passing)[: config.max_refs]
+    return Selection([s[2] for s in chosen], {s[2]: s[3] for s in chosen}, relaxed)

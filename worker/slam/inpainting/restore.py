@@ -1,0 +1,119 @@
+"""Restore the RGB and depth behind removed (dynamic) regions from reference frames.
+
+Geometry first: each reference's static pixels are forward-projected into the target with depth and relative
+pose; that gives every hole pixel it covers a starting match. PatchMatch then corrects what geometry gets wrong
+(pose or depth noise, colour/depth misregistration) and fills what no reference sees from the target's own
+static region. Depth comes through the same matches (reference depth expressed in the target camera), with a
+confidence from the match cost so unreliable pixels stay invalid.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from worker.slam.inpainting.patchmatch import PatchMatchConfig, patchmatch_fill
+from worker.slam.inpainting.warp import depth_in_target, forward_warp, relative_pose
+
+
+@dataclass(frozen=True)
+class RestorationConfig:
+    """Background restoration of one frame."""
+
+    patchmatch: PatchMatchConfig = field(default_factory=PatchMatchConfig)
+    use_target_as_source: bool = True
+    """Let PatchMatch copy from the target's own static region where no reference sees the background."""
+    max_depth_cost: float = 0.002
+    """Matches whose patch cost (mean squared colour error, colours in [0, 1]) exceeds this give no depth."""
+    searched_depth: bool = False
+    """Give depth to pixels PatchMatch found by appearance alone (no geometric support). Off: on synthetic truth
+    their depth is off by ~10 cm median (look-alike textures elsewhere), so they stay invalid."""
+    geometry_first: bool = True
+    """Hole pixels a reference sees through geometry take that pixel directly and become context; PatchMatch
+    searches only the rest. Measured on synthetic truth: free PatchMatch over geometry-initialised pixels drifts
+    to look-alike patches (34 dB → 25 dB on covered pixels), so geometry is trusted where it exists."""
+
+
+@dataclass(frozen=True)
+class ReferenceView:
+    """A reference frame: `rgb` RGB uint8 (H, W, 3), `depth` float32 m (H, W), pose `T_WC`, and `dynamic`
+    bool (H, W) marking its own moving pixels, which must not be copied."""
+
+    rgb: np.ndarray
+    depth: np.ndarray
+    T_WC: np.ndarray
+    dynamic: np.ndarray
+
+
+@dataclass(frozen=True)
+class Restoration:
+    """`rgb` (H, W, 3) uint8 and `depth` (H, W) float32 m with the hole filled; `depth_confidence` (H, W) in
+    [0, 1] (0 outside the hole and where depth was left invalid); `from_geometry` fraction of hole pixels whose
+    final match is a reference pixel; `from_self` fraction copied from the target itself."""
+
+    rgb: np.ndarray
+    depth: np.ndarray
+    depth_confidence: np.ndarray
+    hole: np.ndarray
+    seen_by_reference: np.ndarray
+    """bool (H, W): hole pixels some reference sees through geometry."""
+    from_geometry: float
+    from_self: float
+
+
+def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np.ndarray,
+                  refs: list[ReferenceView], K: np.ndarray,
+                  config: RestorationConfig = RestorationConfig()) -> Restoration:
+    """Fill `hole` (H, W) bool in `rgb` (H, W, 3) uint8 and `depth` (H, W) float32 of a frame at pose T_WC."""
+    h, w = hole.shape
+    if not hole.any():
+        return Restoration(rgb.copy(), depth.copy(), np.zeros((h, w), np.float32), hole, hole.copy(), 0.0, 0.0)
+    py, px = np.nonzero(hole)
+    region = (int(py.min()), int(py.max()) + 1, int(px.min()), int(px.max()) + 1)
+    sources, valid, rel = [], [], []
+    init_src = np.full(len(py), -1, np.int64)
+    init_yx = np.full((len(py), 2), -1, np.int64)
+    for s, ref in enumerate(refs):
+        rel.append(relative_pose(ref.T_WC, T_WC))
+        landed = forward_warp(ref.depth, ~ref.dynamic, rel[-1], K, region)[py - region[0], px - region[2]]
+        hit = (landed[:, 0] >= 0) & (init_src < 0)  # earlier (better) references first
+        init_src[hit] = s
+        init_yx[hit] = landed[hit]
+        sources.append(ref.rgb)
+        valid.append(~ref.dynamic)
+    self_index = -1
+    if config.use_target_as_source or not refs:
+        self_index = len(sources)
+        sources.append(rgb)
+        valid.append(~cv2.dilate(hole.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool))
+    src_all, yx_all = init_src.copy(), init_yx.copy()
+    cost_all = np.zeros(len(py))
+    out_rgb = rgb.copy()
+    geo = init_src >= 0
+    if config.geometry_first and geo.any():
+        out_rgb[py[geo], px[geo]] = np.stack(sources)[init_src[geo], init_yx[geo, 0], init_yx[geo, 1]]
+    search = ~geo if config.geometry_first else np.ones(len(py), bool)
+    if search.any():
+        # PatchMatch visits only the pixels it must fill, so its cost scales with them, not the image.
+        pm_hole = np.zeros_like(hole)
+        pm_hole[py[search], px[search]] = True
+        res = patchmatch_fill(out_rgb, pm_hole, np.stack(sources), np.stack(valid), init_src[search],
+                              init_yx[search], config.patchmatch)
+        out_rgb = res.rgb
+        src_all[search], yx_all[search], cost_all[search] = res.source, res.yx, res.cost
+    d = np.zeros(len(py), np.float32)
+    for s, ref in enumerate(refs):
+        m = src_all == s
+        d[m] = depth_in_target(ref.depth, yx_all[m], rel[s], K)
+    conf = np.exp(-cost_all / config.max_depth_cost).astype(np.float32)
+    ok = (cost_all <= config.max_depth_cost) & (d > 0) & (geo | config.searched_depth)
+    out_depth = depth.copy()
+    out_depth[py, px] = np.where(ok, d, 0.0)
+    confidence = np.zeros((h, w), np.float32)
+    confidence[py, px] = np.where(ok, conf, 0.0)
+    n = max(len(py), 1)
+    from_self = float(np.sum(src_all == self_index)) / n
+    seen = np.zeros_like(hole)
+    seen[py[geo], px[geo]] = True
+    return Restoration(out_rgb, out_depth, confidence, hole, seen, 1.0 - from_self if refs else 0.0, from_self)

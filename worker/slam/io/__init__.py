@@ -1,0 +1,1 @@
+"""Reading and writing sequences and trajectories on disk."""

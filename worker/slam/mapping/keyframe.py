@@ -1,0 +1,29 @@
+"""Keyframes: a frame kept in the map with its features, the map points they observe and a small RGB-D copy."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from worker.slam.features.types import Features
+
+
+@dataclass
+class KeyFrame:
+    """`T_WC` 4x4 float64 (updated by BA / loop closure). `point_ids` (N,) int64 map point per keypoint
+    (-1 none). `rgb_small` (h,w,3) uint8 RGB and `depth_small` (h,w) float32 metres (0 = invalid or excluded)
+    are the strided copy the dense map is fused from."""
+
+    id: int
+    frame_index: int
+    timestamp: float
+    T_WC: np.ndarray
+    feats: Features
+    point_ids: np.ndarray
+    rgb_small: np.ndarray | None = None
+    depth_small: np.ndarray | None = None
+    bow: dict[int, float] = field(default_factory=dict)
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.T_WC[:3, 3]

@@ -1,0 +1,337 @@
+"""Run a sequence through the pipeline: per-frame stages -> tracking -> local mapping -> loop closure -> dense map.
+
+Frames are streamed (read one at a time); the only per-frame state kept is the pose relative to its
+reference keyframe, so BA and loop corrections move every frame's pose at the end.
+
+Per-frame stages (segmentation, dynamic culling, restoration) plug in through `register_stage`: a factory
+`(config, camera) -> FrameStage`; a config lists the stages it runs in `config.stages`. A stage gets the
+frame, the inputs built so far and a `StageContext` (camera, config, the tracker's last result with its
+pose covariance, and the sequence for reading neighbouring frames), and returns updated `FrameInputs`.
+"""
+from __future__ import annotations
+
+import json
+import resource
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Protocol
+
+import cv2
+import numpy as np
+
+from worker.slam.camera import Camera
+from worker.slam.config import PipelineConfig
+from worker.slam.errors import ConfigError, EvaluationError, SlamError
+from worker.slam.features.types import Features
+from worker.slam.io.sequence import Frame, Sequence
+from worker.slam.io.trajectory import Trajectory, write_tum_trajectory
+from worker.slam.mapping.dense import fuse_keyframes
+from worker.slam.mapping.local_mapping import LocalMapper
+from worker.slam.mapping.loop_closure import LoopCloser
+from worker.slam.mapping.map import Map
+from worker.slam.mapping.ply import write_ply
+from worker.slam.tracking.result import TrackResult
+from worker.slam.tracking.se3 import inv, orthonormalize
+from worker.slam.tracking.tracker import Tracker
+from worker.slam.truth import Truth, load_truth
+
+ProgressFn = Callable[[int, int, str], None]
+"""(frames_done, frames_total, stage) -- stage is 'tracking', 'dense', 'evaluation' or 'writing'."""
+CancelFn = Callable[[], bool]
+"""Returns True when the job should stop; checked before every frame."""
+
+
+class PipelineCancelled(SlamError):
+    """The run was stopped by its cancellation check."""
+
+    code = "cancelled"
+
+
+@dataclass
+class FrameInputs:
+    """What per-frame stages hand to the tracker (all optional; images are the frame's H,W)."""
+
+    exclude_mask: np.ndarray | None = None
+    """bool (H,W): True = pixel must not give features nor enter the dense map."""
+    extra_features: Features | None = None
+    """Keypoints to add to the frame's own (e.g. extracted in restored regions)."""
+    restored_depth: np.ndarray | None = None
+    """float32 metres (H,W): depth with removed regions filled; replaces the raw depth."""
+    restored_rgb: np.ndarray | None = None
+    """uint8 RGB (H,W,3): colour with removed regions filled; replaces the raw colour."""
+    info: dict = field(default_factory=dict)
+    """Per-frame numbers a stage wants reported (e.g. {'dynamic_px': 1234}); their means land in
+    metrics.json under `stage_info`."""
+    features: Features | None = None
+    """The frame's keypoints, already extracted (raw image coordinates) and culled: the tracker uses them
+    instead of extracting its own."""
+    potentially_dynamic: np.ndarray | None = None
+    """bool (H,W): pixels of potentially dynamic classes (segmentation)."""
+    dynamic_mask: np.ndarray | None = None
+    """bool (H,W): pixels judged moving (culling)."""
+    previews: dict[str, np.ndarray] | None = None
+    """RGB uint8 images worth saving for this frame (e.g. {'rgb', 'mask', 'restored'})."""
+
+
+@dataclass
+class StageContext:
+    camera: Camera
+    config: PipelineConfig
+    tracker: Tracker
+    """`tracker.last_result` (TrackResult: T_WC, covariance, feats) of the last tracked frame; `tracker.map`."""
+    sequence: Sequence | None
+    """For reading neighbouring frames (random access, decoded on demand)."""
+    truth: Truth | None = None
+    """The sequence's ground truth of dynamic pixels and background (`truth/`), when it has one."""
+
+
+class FrameStage(Protocol):
+    name: str
+
+    def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs: ...
+
+    def summary(self) -> dict:
+        """Run-level figures of the stage (stored in metrics.json under the stage's name)."""
+        ...
+
+
+StageFactory = Callable[[PipelineConfig, Camera], FrameStage]
+_STAGES: dict[str, StageFactory] = {}
+
+
+def register_stage(name: str, factory: StageFactory) -> None:
+    _STAGES[name] = factory
+
+
+def _register_dynamic_stages() -> None:
+    from worker.slam.dynamic.stage import CullingStage, SegmentationStage
+    from worker.slam.inpainting.stage import RestorationStage
+
+    for cls in (SegmentationStage, CullingStage, RestorationStage):
+        register_stage(cls.name, cls)
+
+
+def build_stages(config: PipelineConfig, camera: Camera) -> list[FrameStage]:
+    missing = [s for s in config.stages if s not in _STAGES]
+    if missing:
+        raise ConfigError(f"unknown pipeline stages {missing}; registered: {sorted(_STAGES)}")
+    return [_STAGES[s](config, camera) for s in config.stages]
+
+
+@dataclass
+class RunResult:
+    trajectory: Trajectory
+    """Every processed frame's T_WC."""
+    keyframes: Trajectory
+    metrics: dict
+    slam_map: Map
+    tracked: np.ndarray
+    """(N,) bool per frame."""
+    cloud: tuple[np.ndarray, np.ndarray] | None = None
+    """Dense map (M,3) float32 xyz, (M,3) uint8 RGB."""
+    frame_stats: list[dict] = field(default_factory=list)
+    """Per frame: frame_index, timestamp, tracked, features, matched_points, ate_error and stage numbers."""
+    aligned_groundtruth: Trajectory | None = None
+    """Ground truth expressed in the estimate's frame (SE(3)-aligned), for plots."""
+    previews: dict[int, dict[str, np.ndarray]] = field(default_factory=dict)
+    """A few frames' preview images by frame index."""
+
+
+class _Timer:
+    def __init__(self) -> None:
+        self.ms: dict[str, list[float]] = defaultdict(list)
+
+    def __call__(self, name: str, t0: float) -> float:
+        t1 = time.perf_counter()
+        self.ms[name].append((t1 - t0) * 1000)
+        return t1
+
+    def means(self) -> dict[str, float]:
+        return {k: round(float(np.mean(v)), 3) for k, v in self.ms.items()}
+
+
+def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str | None = None, *,
+                 start: int = 0, max_frames: int | None = None, progress: ProgressFn | None = None,
+                 should_cancel: CancelFn | None = None, stages: list[FrameStage] | None = None) -> RunResult:
+    """Track frames [start, start+max_frames) of `sequence`; write the outputs to `out_dir` when given."""
+    if start < 0 or start >= len(sequence):
+        raise ConfigError(f"start {start} is outside the sequence (0..{len(sequence) - 1})")
+    stop = len(sequence) if max_frames is None else min(len(sequence), start + max(0, max_frames))
+    total = stop - start
+    first = sequence[start]  # also fixes the camera size (Sequence rescales it on first read)
+    camera = sequence.camera
+    stages = build_stages(config, camera) if stages is None else stages
+    tracker = Tracker(camera, config)
+    smap = tracker.map
+    mapper = LocalMapper(smap, config.mapping, camera.K, tracker.bf, tracker.extractor.inv_sigma2,
+                         config.tracking.huber_px)
+    closer = (LoopCloser(smap, config.loop, camera.K, tracker.bf, tracker.extractor.inv_sigma2)
+              if config.loop.enabled else None)
+    ctx = StageContext(camera, config, tracker, sequence, load_truth(sequence.root))
+    previews = _PreviewPicker(start, total)
+    timer = _Timer()
+    rel: list[tuple[int, np.ndarray]] = []  # per frame: (reference keyframe, T_ref_frame)
+    stamps, tracked = np.zeros(total), np.zeros(total, bool)
+    n_reloc = 0
+    frame_info: list[dict] = []
+    stage_info: dict[str, list[float]] = defaultdict(list)
+    cpu_tracking: list[float] = []  # CPU seconds (all threads): comparable when the machine is shared
+    t_loop = time.perf_counter()
+    for k, i in enumerate(range(start, stop)):
+        if should_cancel is not None and should_cancel():
+            raise PipelineCancelled(f"cancelled after {k} of {total} frames")
+        t = time.perf_counter()
+        frame = first if k == 0 else sequence[i]
+        t = timer("read", t)
+        inputs = FrameInputs()
+        for st in stages:
+            inputs = st.process(frame, inputs, ctx)
+            t = timer(st.name, t)
+        for key, val in inputs.info.items():
+            if isinstance(val, (int, float)) and not isinstance(val, bool):
+                stage_info[key].append(float(val))
+        c0 = time.process_time()
+        if inputs.previews:
+            previews.offer(frame.index, inputs.previews)
+        res = tracker.track(frame.index, frame.timestamp, frame.rgb, frame.depth,
+                            exclude_mask=inputs.exclude_mask, extra_features=inputs.extra_features,
+                            restored_depth=inputs.restored_depth, restored_rgb=inputs.restored_rgb,
+                            features=inputs.features)
+        cpu_tracking.append(time.process_time() - c0)
+        t = timer("tracking", t)
+        if res.keyframe is not None:
+            mapper.process(res.keyframe)
+            t = timer("local_mapping", t)
+            if closer is not None:
+                closer.process(res.keyframe)
+                t = timer("loop_closure", t)
+            tracker.on_map_updated(res)
+        stamps[k], tracked[k] = frame.timestamp, res.ok
+        frame_info.append({"features": len(res.feats), "matched_points": int(np.sum(res.point_ids >= 0)),
+                           **{k2: v for k2, v in inputs.info.items() if isinstance(v, (int, float))}})
+        n_reloc += int(res.relocalised)
+        rel.append(_relative(smap, res))
+        if progress is not None:
+            progress(k + 1, total, "tracking")
+    loop_s = time.perf_counter() - t_loop
+    if config.mapping.final_global_ba:
+        t = time.perf_counter()
+        mapper.global_bundle_adjust(config.mapping.global_ba_iterations)
+        timer("global_ba", t)
+
+    if progress is not None:
+        progress(total, total, "dense")
+    t = time.perf_counter()
+    poses = np.stack([smap.keyframes[r].T_WC @ T_rf if len(smap) else T_rf for r, T_rf in rel])
+    traj = Trajectory(stamps, orthonormalize(poses))
+    kf_traj = Trajectory(np.array([kf.timestamp for kf in smap.keyframes]), smap.poses())
+    cloud = None
+    if config.dense.enabled and len(smap):
+        cloud = fuse_keyframes(smap.keyframes, camera.K, config.dense.stride, config.dense.voxel_m,
+                               config.dense.max_depth_m, np.asarray(camera.dist) if camera.has_distortion else None,
+                               config.dense.edge_rel)
+        timer("dense", t)
+    metrics = {
+        "frames": total, "tracked": int(tracked.sum()), "lost": int((~tracked).sum()),
+        "relocalisations": n_reloc, "keyframes": len(smap), "map_points": smap.points.n_alive,
+        "loops": closer.n_loops if closer else 0, "loops_applied": closer.n_applied if closer else 0,
+        "fps": round(total / loop_s, 2) if loop_s > 0 else None,
+        "tracking_fps": round(1000.0 / np.mean(timer.ms["tracking"]), 2) if timer.ms["tracking"] else None,
+        "tracking_cpu_ms": round(1000 * float(np.mean(cpu_tracking)), 3) if cpu_tracking else None,
+        "timings_ms": timer.means(),
+        "dense_points": int(len(cloud[0])) if cloud else 0,
+        "stage_info": {k: round(float(np.mean(v)), 4) for k, v in stage_info.items()},
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+        "camera": camera.to_dict(), "preset": config.name, "start": start,
+    }
+    for st in stages:
+        summary = getattr(st, "summary", None)
+        if summary is not None:
+            metrics[st.name] = summary()
+    aligned_gt, ate_errors = None, None
+    if sequence.groundtruth is not None:
+        if progress is not None:
+            progress(total, total, "evaluation")
+        ev, aligned_gt, ate_errors = _evaluate(sequence, traj, config)
+        metrics.update(ev)
+    for k, info in enumerate(frame_info):
+        info.update(frame_index=start + k, timestamp=float(stamps[k]), tracked=bool(tracked[k]),
+                    ate_error=None if ate_errors is None else ate_errors.get(round(float(stamps[k]), 6)))
+    result = RunResult(traj, kf_traj, metrics, smap, tracked, cloud, frame_info, aligned_gt, previews.kept)
+    if out_dir is not None:
+        if progress is not None:
+            progress(total, total, "writing")
+        write_outputs(result, config, Path(out_dir))
+    return result
+
+
+def _relative(smap: Map, res: TrackResult) -> tuple[int, np.ndarray]:
+    if not len(smap):
+        return 0, res.T_WC.copy()
+    ref = min(res.ref_kf, len(smap) - 1)
+    return ref, inv(smap.keyframes[ref].T_WC) @ res.T_WC
+
+
+def _evaluate(sequence: Sequence, traj: Trajectory,
+              config: PipelineConfig) -> tuple[dict, Trajectory | None, dict[float, float] | None]:
+    """(metrics, ground truth aligned onto the estimate, per-frame ATE by rounded timestamp)."""
+    from worker.slam.evaluation.metrics import evaluate
+
+    try:
+        ev = evaluate(sequence.groundtruth, traj, config.eval.max_diff_s, config.eval.rpe_delta_s)
+    except EvaluationError as exc:
+        return {"evaluation_error": exc.message}, None, None
+    errors = {round(float(t), 6): float(e) for t, e in zip(ev.matched_timestamps, ev.ate_errors)}
+    return ev.to_dict(), ev.aligned_groundtruth, errors
+
+
+class _PreviewPicker:
+    """Keeps the preview images of a few frames spread over the run (bounded memory)."""
+
+    def __init__(self, start: int, total: int, count: int = 6) -> None:
+        step = max(1, total // (count + 1))
+        self.wanted = {start + step * (i + 1) for i in range(count)}
+        self.kept: dict[int, dict[str, np.ndarray]] = {}
+
+    def offer(self, index: int, images: dict[str, np.ndarray]) -> None:
+        # the first frame with previews at or after each wanted index
+        due = [w for w in self.wanted if w <= index]
+        if due:
+            self.wanted -= set(due)
+            self.kept[index] = images
+
+
+def write_outputs(result: RunResult, config: PipelineConfig, out: Path) -> None:
+    """trajectory.txt, keyframes.txt (TUM), map.ply, metrics.json, config.json."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_tum_trajectory(out / "trajectory.txt", result.trajectory, header="VTD-SLAM trajectory T_WC (every frame)")
+    write_tum_trajectory(out / "keyframes.txt", result.keyframes, header="VTD-SLAM keyframes T_WC")
+    xyz, rgb = result.cloud if result.cloud is not None else (np.zeros((0, 3)), np.zeros((0, 3), np.uint8))
+    write_ply(out / "map.ply", xyz, rgb)
+    (out / "metrics.json").write_text(json.dumps(result.metrics, indent=2))
+    (out / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
+    if result.aligned_groundtruth is not None:
+        write_tum_trajectory(out / "groundtruth_aligned.txt", result.aligned_groundtruth,
+                             header="ground truth T_WC aligned onto the estimate (SE(3) Umeyama)")
+    _write_frame_stats(out / "frame_stats.csv", result.frame_stats)
+    for index, images in result.previews.items():
+        for kind, img in images.items():
+            cv2.imwrite(str(out / f"frame_{index:06d}_{kind}.jpg"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR),
+                        [cv2.IMWRITE_JPEG_QUALITY, 85])
+
+
+def _write_frame_stats(path: Path, rows: list[dict]) -> None:
+    import csv
+
+    keys = ["frame_index", "timestamp", "tracked", "ate_error", "features", "matched_points"]
+    keys += sorted({k for r in rows for k in r} - set(keys))
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=keys)
+        writer.writeheader()
+        for r in rows:
+            writer.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in keys})
+
+
+_register_dynamic_stages()

@@ -1,0 +1,124 @@
+"""The segmentation stage's contract: a `Segmenter` protocol, its result type, its config and a factory.
+
+Backends are imported lazily by the factory so that choosing `tflite-teacher` never imports torch and choosing
+`msnet` never imports ai-edge-litert.
+"""
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from worker.slam.errors import ConfigError, SlamError
+
+
+class SegmentationError(SlamError):
+    """A segmenter got an input it cannot process, or its model file is unusable."""
+
+    code = "segmentation_failed"
+
+
+@dataclass(frozen=True)
+class SegmentationResult:
+    """Per-pixel classes of one frame, at the input frame's resolution."""
+
+    labels: np.ndarray
+    """(H, W) uint8 index into `classes` (argmax of `probs` when present)."""
+    classes: tuple[str, ...]
+    """Class names; index 0 is the background."""
+    dynamic_classes: tuple[str, ...]
+    """Classes the pipeline treats as potentially dynamic (a subset of `classes`)."""
+    probs: np.ndarray | None = None
+    """(H, W, K) float32 per-class probabilities summing to 1, or None for label-only backends."""
+
+    def class_mask(self, name: str) -> np.ndarray:
+        """(H, W) bool mask of one class; all False when the backend does not know the class."""
+        if name not in self.classes:
+            return np.zeros(self.labels.shape, dtype=bool)
+        return self.labels == self.classes.index(name)
+
+    def dynamic_mask(self) -> np.ndarray:
+        """(H, W) bool mask of every potentially dynamic class."""
+        ids = [self.classes.index(c) for c in self.dynamic_classes if c in self.classes]
+        return np.isin(self.labels, ids)
+
+
+@runtime_checkable
+class Segmenter(Protocol):
+    """Anything that turns an RGB frame into a `SegmentationResult`."""
+
+    classes: tuple[str, ...]
+    dynamic_classes: tuple[str, ...]
+
+    def segment(self, rgb: np.ndarray) -> SegmentationResult:
+        """rgb: (H, W, 3) uint8, RGB order. Returns labels (and probabilities) at (H, W)."""
+        ...
+
+
+@dataclass(frozen=True)
+class SegmenterConfig:
+    """Which segmenter the pipeline uses and how it runs."""
+
+    backend: str = "msnet"
+    """Registered backend name: `msnet` (default, the project's network) or `tflite-teacher`."""
+    checkpoint: str | None = None
+    """msnet: checkpoint file; None = the shipped `segmentation/weights/msnet_default.pt`."""
+    model_path: str | None = None
+    """tflite-teacher: a user-supplied .tflite model (DeepLabV3 PASCAL-VOC logits or class map, or a
+    one-channel person-probability model such as MediaPipe selfie segmentation)."""
+    device: str = "auto"
+    """msnet: `auto` (CUDA when present, else CPU), `cpu` or `cuda`."""
+    threads: int | None = None
+    """CPU threads for inference; None leaves the library default (the process may share cores)."""
+    with_probs: bool = True
+    """Also return per-class probabilities at full resolution (costs a resize per class)."""
+    dynamic_classes: tuple[str, ...] | None = None
+    """Override the backend's potentially dynamic classes; None keeps its default (person, chair)."""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def check_rgb(rgb: np.ndarray) -> None:
+    """Cheap entry check shared by the backends."""
+    if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
+        desc = f"{rgb.dtype} {rgb.shape}" if isinstance(rgb, np.ndarray) else type(rgb).__name__
+        raise SegmentationError(f"segmenter expects an RGB uint8 (H, W, 3) image, got {desc}")
+    if rgb.shape[0] < 8 or rgb.shape[1] < 8:
+        raise SegmentationError(f"image too small to segment: {rgb.shape[1]}x{rgb.shape[0]}")
+
+
+# name -> "module:factory"; a factory takes a SegmenterConfig and returns a Segmenter.
+_BACKENDS = MappingProxyType({
+    "msnet": "worker.slam.segmentation.msnet.segmenter:MsnetSegmenter.from_config",
+    "tflite-teacher": "worker.slam.segmentation.tflite_teacher:TfliteSegmenter.from_config",
+})
+
+
+def available_backends() -> tuple[str, ...]:
+    return tuple(_BACKENDS)
+
+
+def _resolve(spec: str) -> Callable[[SegmenterConfig], Segmenter]:
+    module, _, attr = spec.partition(":")
+    obj = importlib.import_module(module)
+    for part in attr.split("."):
+        obj = getattr(obj, part)
+    return obj  # type: ignore[return-value]
+
+
+def make_segmenter(config: SegmenterConfig | None = None) -> Segmenter:
+    """Build the configured segmenter. Raises ConfigError for an unknown backend or a missing model file."""
+    config = config or SegmenterConfig()
+    if config.backend not in _BACKENDS:
+        raise ConfigError(f"unknown segmentation backend {config.backend!r}",
+                          detail={"available": list(_BACKENDS)})
+    for p in (config.checkpoint, config.model_path):
+        if p is not None and not Path(p).is_file():
+            raise ConfigError(f"segmentation model file not found: {p}", detail={"path": str(p)})
+    return _resolve(_BACKENDS[config.backend])(config)

@@ -1,0 +1,59 @@
+"""The `msnet` backend of the Segmenter protocol: resize, run MSNET, bring probabilities back to full size."""
+from __future__ import annotations
+
+
+import cv2
+import numpy as np
+import torch
+
+from worker.slam.segmentation.base import SegmentationResult, SegmenterConfig, check_rgb
+from worker.slam.segmentation.msnet.checkpoint import load_model
+from worker.slam.segmentation.msnet.model import MSNet
+
+
+def pick_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+class MsnetSegmenter:
+    """Runs a trained MSNET at its configured input size; outputs at the frame's own resolution."""
+
+    def __init__(self, model: MSNet, device: torch.device, with_probs: bool = True,
+                 dynamic_classes: tuple[str, ...] | None = None) -> None:
+        self.model = model.to(device).eval()
+        self.device = device
+        self.with_probs = with_probs
+        self.classes = model.cfg.classes
+        self.dynamic_classes = tuple(dynamic_classes) if dynamic_classes is not None else model.cfg.dynamic_classes
+
+    @classmethod
+    def from_config(cls, config: SegmenterConfig) -> MsnetSegmenter:
+        if config.threads:
+            torch.set_num_threads(config.threads)
+        device = pick_device(config.device)
+        model, _ = load_model(config.checkpoint, device)
+        return cls(model, device, config.with_probs, config.dynamic_classes)
+
+    def _logits(self, rgb: np.ndarray) -> torch.Tensor:
+        h, w = self.model.cfg.input_size
+        small = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
+        x = torch.from_numpy(small).to(self.device).permute(2, 0, 1)[None].float().div_(255.0)
+        return self.model(x).logits
+
+    @torch.inference_mode()
+    def predict_probs(self, rgb: np.ndarray) -> np.ndarray:
+        """rgb (H, W, 3) uint8 -> probabilities (h, w, K) float32 at the network's input size."""
+        return self._logits(rgb).softmax(1)[0].permute(1, 2, 0).float().cpu().numpy()
+
+    def segment(self, rgb: np.ndarray) -> SegmentationResult:
+        """rgb: (H, W, 3) uint8 RGB -> labels (H, W) and probabilities (H, W, K) at the input resolution."""
+        check_rgb(rgb)
+        # Probabilities are upsampled with OpenCV on (h, w, K) and the argmax taken over the contiguous last
+        # axis: torch's argmax over dim 0 of a (K, H, W) map took 29 ms of a 44 ms frame on one core.
+        probs = cv2.resize(self.predict_probs(rgb), (rgb.shape[1], rgb.shape[0]), interpolation=cv2.INTER_LINEAR)
+        if probs.ndim == 2:  # OpenCV drops a singleton channel axis (a background-only model)
+            probs = probs[..., None]
+        labels = probs.argmax(-1).astype(np.uint8)
+        return SegmentationResult(labels, self.classes, self.dynamic_classes, probs if self.with_probs else None)

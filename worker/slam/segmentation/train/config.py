@@ -1,0 +1,141 @@
+"""Training configuration: one dataclass, named presets, JSON files layered over a preset."""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+
+from worker.slam.errors import ConfigError
+from worker.slam.segmentation.msnet.config import MsnetConfig
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything a training run depends on; `{shared}` in paths expands to `shared_dir`."""
+
+    model: MsnetConfig = field(default_factory=MsnetConfig)
+    """Architecture of the network being trained."""
+    shared_dir: str = "../shared"
+    """Where the shared data and teacher models live (the CLI fills it from VTD_SHARED_DIR)."""
+    yolo_dirs: tuple[str, ...] = ("{shared}/data/coco128_seg",)
+    """YOLO-seg datasets (images/ + labels/ with normalised polygons)."""
+    yolo_class_ids: dict[str, int] = field(default_factory=lambda: {"person": 0, "chair": 56})
+    """Our class name -> YOLO (COCO-80) class id."""
+    coco_json: tuple[tuple[str, str], ...] = ()
+    """(instances JSON, image folder) pairs in COCO format; categories match by name."""
+    coco_names: dict[str, str] = field(default_factory=lambda: {"person": "person", "chair": "chair"})
+    """COCO category name -> our class name."""
+    holdout_every: int = 5
+    """Every n-th labelled image (sorted by path) is held out for validation and never trained on."""
+    backgrounds: tuple[str, ...] = ("{shared}/data/7scenes_redkitchen/data/*.color.jpg",)
+    """Globs of unlabelled background frames for copy-paste and distillation (assumed free of people)."""
+    background_stride: int = 2
+    """Use every n-th background frame (neighbouring video frames are near-duplicates)."""
+    teacher: str | None = "{shared}/models/deeplabv3_257_mv_gpu.tflite"
+    """TFLite teacher for soft labels; None trains on labels and pasted masks only."""
+    cache_dir: str = "/tmp/msnet_cache"
+    """Teacher soft labels are computed once and kept here."""
+    out_dir: str = "runs/msnet"
+    """Checkpoints (`last.pt` for resume, `msnet.pt` weights) and `metrics.jsonl`."""
+    epochs: int = 40
+    """Passes over `samples_per_epoch` freshly drawn samples."""
+    samples_per_epoch: int = 2000
+    """Samples per epoch (composites are generated, so an epoch is a budget, not a dataset size)."""
+    batch_size: int = 8
+    lr: float = 1.5e-3
+    """Peak AdamW learning rate (one-cycle: warm-up then cosine decay)."""
+    weight_decay: float = 0.01
+    warmup_fraction: float = 0.05
+    ema_decay: float = 0.998
+    """Exponential moving average of the weights (and BN statistics) that is validated and saved; smooths the
+    epoch-to-epoch swings of a network trained from scratch on little data. 0 disables it."""
+    bn_recalibration_stride: int = 5
+    """After training, re-estimate BatchNorm statistics on every n-th background frame (AdaBN); 0 disables."""
+    kd_weight: float = 1.0
+    """Weight of the soft-label (teacher) cross-entropy against the hard-label cross-entropy."""
+    query_weight: float = 0.1
+    """Weight of the loss that keeps decoder query q predicting class q."""
+    class_weights: tuple[float, ...] = (1.0, 2.0, 1.5)
+    """Cross-entropy weight per class (people matter most to the SLAM pipeline)."""
+    p_labelled: float = 0.4
+    """Probability that a sample is a labelled image rather than a copy-paste composite."""
+    max_pastes: int = 3
+    """Up to this many cut-outs per composite (zero sometimes: pure background frames are distilled too)."""
+    p_chair_paste: float = 0.3
+    """Probability that a pasted cut-out is a chair rather than a person."""
+    p_distractor_paste: float = 0.35
+    """Probability that a pasted cut-out is another object (labelled background), so that being pasted is not
+    itself a cue for person/chair."""
+    distractor_height: tuple[float, float] = (0.15, 0.7)
+    """Pasted distractor height as a fraction of the image height."""
+    person_height: tuple[float, float] = (0.35, 1.1)
+    """Pasted person height as a fraction of the image height."""
+    chair_height: tuple[float, float] = (0.2, 0.6)
+    time_budget_min: float | None = None
+    """Wall-clock cap: the LR schedule runs on max(step fraction, time fraction) and training stops at the
+    cap, so a run on a shared CPU still anneals and finishes. None = train all epochs."""
+    seed: int = 0
+    threads: int = 1
+    """Torch CPU threads. On a shared, oversubscribed CPU one thread was 10x faster than two (OpenMP threads
+    wait for each other when the scheduler parks one of them); raise it on a dedicated machine."""
+    workers: int = 1
+    """DataLoader worker processes generating samples."""
+    device: str = "auto"
+    """`auto` uses CUDA when present."""
+
+    def path(self, value: str) -> Path:
+        return Path(value.replace("{shared}", self.shared_dir)).expanduser()
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _from_dict(base: TrainConfig, data: dict) -> TrainConfig:
+    known = {f.name for f in fields(TrainConfig)}
+    unknown = set(data) - known - {"preset"}
+    if unknown:
+        raise ConfigError(f"unknown training config keys: {sorted(unknown)}")
+    values = {}
+    for k, v in data.items():
+        if k == "preset":
+            continue
+        if k == "model":
+            values[k] = MsnetConfig.from_dict({**base.model.to_dict(), **v})
+        elif isinstance(v, list):
+            values[k] = tuple(tuple(x) if isinstance(x, list) else x for x in v)
+        else:
+            values[k] = v
+    return replace(base, **values)
+
+
+def presets() -> dict[str, TrainConfig]:
+    """`cpu`: the recipe of the shipped checkpoint. `paper`: the paper's hyper-parameters (for a GPU).
+    `smoke`: seconds-long run for tests."""
+    cpu = TrainConfig(time_budget_min=58.0)
+    return {
+        "cpu": cpu,
+        "paper": replace(cpu, lr=1e-3, epochs=64, batch_size=4, samples_per_epoch=20000, workers=4, threads=0,
+                         time_budget_min=None, model=replace(cpu.model, dropout=0.56)),
+        "smoke": replace(cpu, epochs=1, samples_per_epoch=8, batch_size=4, workers=0, teacher=None,
+                         background_stride=50, time_budget_min=None),
+    }
+
+
+def load_train_config(spec: str, **overrides) -> TrainConfig:
+    """A preset name, or a JSON file (optionally with "preset": NAME as its base, default `cpu`)."""
+    table = presets()
+    if spec in table:
+        cfg = table[spec]
+    else:
+        path = Path(spec)
+        if not path.is_file():
+            raise ConfigError(f"{spec!r} is neither a preset ({', '.join(table)}) nor a config file")
+        try:
+            data = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise ConfigError(f"{path}: invalid JSON: {exc}") from exc
+        base = data.get("preset", "cpu")
+        if base not in table:
+            raise ConfigError(f"{path}: unknown base preset {base!r}")
+        cfg = _from_dict(table[base], data)
+    return _from_dict(cfg, {k: v for k, v in overrides.items() if v is not None})

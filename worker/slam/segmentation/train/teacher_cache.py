@@ -1,0 +1,49 @@
+"""Teacher soft labels, computed once per (teacher, image list) and cached as uint8 probabilities on disk."""
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from worker.slam.errors import ConfigError
+from worker.slam.io.images import read_rgb
+
+
+def cache_key(teacher: Path, images: list[Path]) -> str:
+    h = hashlib.sha1(str(teacher.resolve()).encode())
+    for p in images:
+        h.update(str(p.resolve()).encode())
+    return f"{teacher.stem}-{len(images)}-{h.hexdigest()[:12]}"
+
+
+def soft_labels(teacher: Path, images: list[Path], classes: tuple[str, ...], cache_dir: Path,
+                threads: int = 1) -> np.ndarray:
+    """(N, h, w, K) uint8 probabilities x 255 over `classes` at the teacher's output grid (the whole image).
+
+    Teacher classes missing from `classes` are an error; our classes the teacher lacks get probability 0.
+    """
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    path = cache_dir / f"{cache_key(teacher, images)}.npy"
+    if path.is_file():
+        return np.load(path, mmap_mode="r")
+    from worker.slam.segmentation.tflite_teacher import TfliteSegmenter
+
+    seg = TfliteSegmenter(teacher, threads=threads)
+    missing = set(seg.classes) - set(classes)
+    if missing:
+        raise ConfigError(f"teacher {teacher.name} predicts classes the model lacks: {sorted(missing)}")
+    cols = [classes.index(c) for c in seg.classes]
+    out = None
+    for i, img in enumerate(tqdm(images, desc=f"teacher {teacher.stem}", unit="img")):
+        p = seg.predict_probs(read_rgb(img))
+        if out is None:
+            out = np.zeros((len(images), *p.shape[:2], len(classes)), dtype=np.uint8)
+        out[i][..., cols] = np.clip(np.round(p * 255.0), 0, 255).astype(np.uint8)
+    if out is None:
+        raise ConfigError("no images to label with the teacher")
+    tmp = path.with_suffix(".tmp.npy")
+    np.save(tmp, out)
+    tmp.replace(path)  # atomic: a crash never leaves a truncated cache behind
+    return out

@@ -1,0 +1,159 @@
+"""The training loop: seeded, resumable, with a progress bar, a JSONL metrics log and per-epoch checkpoints."""
+from __future__ import annotations
+
+import json
+import random
+import time
+from dataclasses import replace
+from functools import partial
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
+from tqdm import tqdm
+
+from worker.slam.io.images import read_rgb
+from worker.slam.segmentation.evaluate import confusion, metrics_from_confusion
+from worker.slam.segmentation.msnet.checkpoint import save_model
+from worker.slam.segmentation.msnet.model import MSNet, build_msnet
+from worker.slam.segmentation.msnet.segmenter import pick_device
+from worker.slam.segmentation.train.config import TrainConfig
+from worker.slam.segmentation.train.bn_recalibration import recalibrate_bn
+from worker.slam.segmentation.train.data import build_training_data, find_backgrounds
+from worker.slam.segmentation.train.datasets import LabelledImage, semantic_mask
+from worker.slam.segmentation.train.losses import msnet_loss
+from worker.slam.segmentation.train.mixture import EpochSampler
+
+
+def seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+
+
+def init_worker(seed: int, worker_id: int) -> None:
+    """Data workers: one OpenCV thread each, so they do not fight the training threads for the cores.
+    Samples are seeded by their index; this only covers library code that draws from global RNGs."""
+    cv2.setNumThreads(1)
+    seed_everything(seed + worker_id)
+
+
+def lr_factor(progress: float, warmup_fraction: float) -> float:
+    """One-cycle shape over training progress in [0, 1]: linear warm-up, then cosine decay to 2 %."""
+    if progress < warmup_fraction:
+        return max(progress / warmup_fraction, 0.01)
+    t = min((progress - warmup_fraction) / max(1.0 - warmup_fraction, 1e-9), 1.0)
+    return 0.02 + 0.98 * 0.5 * (1 + np.cos(np.pi * t))
+
+
+def progress_of(step: int, total_steps: int, seconds: float, budget_min: float | None) -> float:
+    by_steps = step / max(total_steps, 1)
+    return max(by_steps, seconds / (60.0 * budget_min)) if budget_min else by_steps
+
+
+@torch.inference_mode()
+def validate(model: MSNet, items: list[LabelledImage], device: torch.device) -> dict:
+    """Per-class IoU / pixel accuracy on held-out images, predicted at the model's input size."""
+    model.eval()
+    classes, (h, w) = model.cfg.classes, model.cfg.input_size
+    cm = np.zeros((len(classes), len(classes)), dtype=np.int64)
+    for item in items:
+        rgb = cv2.resize(read_rgb(item.image), (w, h), interpolation=cv2.INTER_AREA)
+        gt = cv2.resize(semantic_mask(item, classes), (w, h), interpolation=cv2.INTER_NEAREST)
+        x = torch.from_numpy(rgb).permute(2, 0, 1)[None].float().div(255).to(device)
+        pred = model(x).logits.argmax(1)[0].cpu().numpy()
+        cm += confusion(pred, gt, len(classes))
+    model.train()
+    m = metrics_from_confusion(cm, classes, len(items))
+    return {"val_miou": m.miou, "val_mpa": m.mpa, "val_iou": m.iou, "val_acc": m.pixel_acc}
+
+
+def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path:
+    """Train MSNET as `cfg` says; returns the path of the weights-only checkpoint (`out_dir/msnet.pt`)."""
+    out = Path(cfg.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    seed_everything(cfg.seed)
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    device = pick_device(cfg.device)
+    data = build_training_data(cfg)
+    model = build_msnet(cfg.model).to(device)
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    steps_per_epoch = max(cfg.samples_per_epoch // cfg.batch_size, 1)
+    total_steps = steps_per_epoch * cfg.epochs
+    ema = AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(cfg.ema_decay), use_buffers=True) \
+        if cfg.ema_decay > 0 else None
+    start_epoch, elapsed, step = 0, 0.0, 0
+    state_path = out / "last.pt"
+    if resume and state_path.is_file():
+        state = torch.load(state_path, map_location="cpu", weights_only=False)
+        model.load_state_dict(state["model"])
+        if ema is not None and state.get("ema"):
+            ema.load_state_dict(state["ema"])
+        elif ema is not None:  # a run started without EMA begins averaging from its current weights
+            ema.module.load_state_dict(state["model"])
+        opt.load_state_dict(state["optimizer"])
+        torch.set_rng_state(state["torch_rng"])
+        start_epoch, elapsed, step = state["epoch"], state["elapsed_s"], state["step"]
+    (out / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
+    weights = torch.tensor(cfg.class_weights[:cfg.model.num_classes], dtype=torch.float32, device=device)
+    sampler = EpochSampler(len(data.train))
+    # spawn, not fork: forking after OpenCV/OpenMP thread pools exist can deadlock the workers.
+    loader = torch.utils.data.DataLoader(
+        data.train, batch_size=cfg.batch_size, sampler=sampler, drop_last=True, num_workers=cfg.workers,
+        persistent_workers=cfg.workers > 0, multiprocessing_context="spawn" if cfg.workers > 0 else None,
+        worker_init_fn=partial(init_worker, cfg.seed))
+    for epoch in range(start_epoch, cfg.epochs):
+        t0 = time.time()
+        sampler.epoch = epoch
+        model.train()
+        sums: dict[str, float] = {}
+        n = 0
+        bar = tqdm(loader, desc=f"epoch {epoch + 1}/{cfg.epochs}", disable=not progress, unit="batch")
+        for n, batch in enumerate(bar, 1):
+            progress = progress_of(step, total_steps, elapsed + time.time() - t0, cfg.time_budget_min)
+            if progress >= 1.0:
+                break
+            lr = cfg.lr * lr_factor(progress, cfg.warmup_fraction)
+            for group in opt.param_groups:
+                group["lr"] = lr
+            step += 1
+            batch = {k: v.to(device) for k, v in batch.items()}
+            loss, parts = msnet_loss(model(batch["image"]), batch["hard"], batch["soft"], batch["kd_mask"], weights,
+                                     cfg.kd_weight, cfg.query_weight)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
+            opt.step()
+            if ema is not None:
+                ema.update_parameters(model)
+            for k, v in parts.items():
+                sums[k] = sums.get(k, 0.0) + v
+            bar.set_postfix(loss=f"{sums['loss'] / n:.3f}")
+        elapsed += time.time() - t0
+        record = {"epoch": epoch + 1, "step": step, "lr": opt.param_groups[0]["lr"], "elapsed_s": round(elapsed, 1),
+                  **{k: v / max(n, 1) for k, v in sums.items()}}
+        final = ema.module if ema is not None else model
+        if data.held_out:
+            record.update(validate(final, data.held_out, device))
+        with open(out / "metrics.jsonl", "a") as f:
+            f.write(json.dumps(record) + "\n")
+        torch.save({"model": model.state_dict(), "optimizer": opt.state_dict(), "torch_rng": torch.get_rng_state(),
+                    "epoch": epoch + 1, "step": step, "elapsed_s": elapsed,
+                    "ema": ema.state_dict() if ema is not None else None}, state_path.with_suffix(".tmp"))
+        state_path.with_suffix(".tmp").replace(state_path)
+        save_model(out / "msnet.pt", final, {"epoch": epoch + 1, "train_seconds": round(elapsed, 1),
+                                             "train_config": cfg.to_dict(), **{k: v for k, v in record.items()
+                                                                               if k.startswith("val_")}})
+        if progress_of(step, total_steps, elapsed, cfg.time_budget_min) >= 1.0:
+            break
+    frames = find_backgrounds(replace(cfg, background_stride=1))[::max(cfg.bn_recalibration_stride, 1)]
+    if cfg.bn_recalibration_stride > 0 and frames:
+        tuned = recalibrate_bn(ema.module if ema is not None else model, frames)
+        meta = {"bn_recalibrated_on": len(frames), "train_config": cfg.to_dict(), "train_seconds": round(elapsed, 1)}
+        if data.held_out:
+            meta.update(validate(tuned, data.held_out, device))
+        save_model(out / "msnet.pt", tuned, meta)
+    return out / "msnet.pt"

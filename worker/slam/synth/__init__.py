@@ -1,0 +1,1 @@
+"""Synthetic dynamic RGB-D sequences with exact truth: a textured room, walking figures, a Kinect-like sensor."""

@@ -1,0 +1,1 @@
+"""RGB-D camera tracking: motion model, projection search, PnP-RANSAC, motion-only BA, relocalisation."""

@@ -1,0 +1,89 @@
+"""Search by projection: map points are projected with a predicted pose and matched to nearby keypoints."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from worker.slam.features.matching import hamming
+from worker.slam.features.types import Features
+
+K_NEAREST = 8
+
+
+@dataclass
+class ProjectionMatches:
+    """`point_idx` (M,) indices into the candidate points; `kp_idx` (M,) keypoint indices; `visible` (P,)
+    bool: candidate projected inside the image within its scale/viewing-angle range."""
+
+    point_idx: np.ndarray
+    kp_idx: np.ndarray
+    visible: np.ndarray
+
+
+class KeypointIndex:
+    """A k-d tree over one frame's keypoints, built once per frame and reused by every search."""
+
+    def __init__(self, feats: Features) -> None:
+        self.feats = feats
+        self.tree = cKDTree(feats.uv) if len(feats) else None
+
+
+def search_by_projection(index: KeypointIndex, X_w: np.ndarray, desc: np.ndarray, normal: np.ndarray,
+                         max_dist: np.ndarray, T_WC: np.ndarray, K: np.ndarray, size: tuple[int, int],
+                         scales: np.ndarray, radius_px: float, max_hamming: int, ratio: float,
+                         taken: np.ndarray | None = None) -> ProjectionMatches:
+    """Match (P,3) world points `X_w` (descriptors (P,32)) to keypoints of `index` under pose `T_WC`.
+
+    `size` = (width, height). `scales` (levels,) pyramid scales; the search radius grows with the scale
+    of the octave the point is predicted at, as in ORB-SLAM2. `taken` (N,) bool marks keypoints already
+    matched (skipped). Each keypoint is given to at most one point (the closest descriptor).
+    """
+    P = len(X_w)
+    empty = ProjectionMatches(np.zeros(0, int), np.zeros(0, int), np.zeros(P, bool))
+    feats = index.feats
+    if P == 0 or index.tree is None:
+        return empty
+    R_CW = T_WC[:3, :3].T
+    center = T_WC[:3, 3]
+    Pc = (X_w - center) @ R_CW.T
+    z = Pc[:, 2]
+    zs = np.where(z > 1e-3, z, 1.0)
+    u = K[0, 0] * Pc[:, 0] / zs + K[0, 2]
+    v = K[1, 1] * Pc[:, 1] / zs + K[1, 2]
+    w, h = size
+    ray = X_w - center
+    dist = np.linalg.norm(ray, axis=1)
+    min_dist = max_dist / scales[-1]
+    cos_view = (ray * normal).sum(1) / np.maximum(dist, 1e-9)
+    vis = ((z > 1e-3) & (u >= 0) & (u < w) & (v >= 0) & (v < h) & (dist > 0.8 * min_dist)
+           & (dist < 1.2 * max_dist) & (cos_view > 0.5))
+    idx = np.flatnonzero(vis)
+    if len(idx) == 0:
+        return ProjectionMatches(empty.point_idx, empty.kp_idx, vis)
+    nl = len(scales)
+    level = np.clip(np.ceil(np.log(max_dist[idx] / dist[idx]) / np.log(scales[1] if nl > 1 else 1.2)), 0, nl - 1)
+    level = level.astype(int)
+    r = radius_px * scales[level]
+    k = min(K_NEAREST, len(feats))
+    d, cand = index.tree.query(np.column_stack([u[idx], v[idx]]), k=k, distance_upper_bound=float(r.max()))
+    d, cand = d.reshape(len(idx), k), cand.reshape(len(idx), k)
+    ok = cand < len(feats)
+    cand_c = np.where(ok, cand, 0)
+    oct_ = feats.octave[cand_c]
+    ok &= (d <= r[:, None]) & (oct_ >= level[:, None] - 1) & (oct_ <= level[:, None] + 1)
+    if taken is not None:
+        ok &= ~taken[cand_c]
+    hd = np.where(ok, hamming(desc[idx][:, None, :], feats.desc[cand_c]), 10_000)
+    order = np.argsort(hd, axis=1)
+    best = np.take_along_axis(hd, order[:, :1], 1)[:, 0]
+    second = np.take_along_axis(hd, order[:, 1:2], 1)[:, 0] if k > 1 else np.full(len(idx), 10_000)
+    best_kp = np.take_along_axis(cand_c, order[:, :1], 1)[:, 0]
+    good = (best <= max_hamming) & ((second >= 10_000) | (best < ratio * second))
+    pi, ki, bd = idx[good], best_kp[good], best[good]
+    # one point per keypoint: keep the lowest descriptor distance
+    o = np.argsort(bd, kind="stable")
+    _, first = np.unique(ki[o], return_index=True)
+    keep = o[first]
+    return ProjectionMatches(pi[keep], ki[keep], vis)

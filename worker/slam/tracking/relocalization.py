@@ -1,0 +1,43 @@
+"""Relocalisation: descriptor matches to keyframes' map points, PnP-RANSAC, then motion-only BA."""
+from __future__ import annotations
+
+import numpy as np
+
+from worker.slam.features.matching import match_ratio
+from worker.slam.features.types import Features
+from worker.slam.mapping.map import Map
+from worker.slam.tracking.pnp import pnp_ransac
+
+
+def relocalisation_candidates(slam_map: Map, n_recent: int, around: int | None) -> list[int]:
+    """Recent keyframes, the reference keyframe's covisible ones, then every 5th older keyframe."""
+    n = len(slam_map)
+    ids = list(range(n - 1, max(-1, n - 1 - n_recent), -1))
+    if around is not None:
+        ids += [around] + slam_map.best_covisible(around, n_recent)
+    ids += list(range(n - 1 - n_recent, -1, -5))
+    seen, out = set(), []
+    for i in ids:
+        if 0 <= i < n and i not in seen:
+            seen.add(i)
+            out.append(i)
+    return out
+
+
+def pnp_against_keyframe(slam_map: Map, kf_id: int, feats: Features, K: np.ndarray,
+                         min_inliers: int) -> tuple[np.ndarray, int] | None:
+    """(T_WC, inliers) of a frame from its descriptor matches to keyframe `kf_id`'s map points, or None."""
+    kf = slam_map.keyframes[kf_id]
+    pid = kf.point_ids
+    has = pid >= 0
+    has[has] = slam_map.points.alive[pid[has]]
+    if has.sum() < min_inliers or len(feats) < min_inliers:
+        return None
+    q, t = match_ratio(feats.desc, kf.feats.desc[has], ratio=0.75, max_dist=70)
+    if len(q) < min_inliers:
+        return None
+    X = slam_map.points.pos[pid[has][t]]
+    res = pnp_ransac(X, feats.uv[q], K, reproj_px=4.0, iterations=300)
+    if res is None or res[1].sum() < min_inliers:
+        return None
+    return res[0], int(res[1].sum())

@@ -1,0 +1,266 @@
+"""The RGB-D tracker: one call per frame, ORB-SLAM2 style.
+
+Per frame: ORB features (minus an optional exclude mask, plus optional extra features), depth per keypoint
+(restored depth when given), pose predicted by the constant-velocity model, projection search against the
+local map (points of the keyframes covisible with the reference keyframe), motion-only BA, a second finer
+search and BA; relocalisation against keyframes when that fails; keyframe decision and creation of new map
+points from keyframe depth. Local BA, culling and loop closure run afterwards on the keyframe it returns.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from worker.slam.camera import Camera
+from worker.slam.config import PipelineConfig
+from worker.slam.features.depth import backproject, lookup_depth
+from worker.slam.features.orb import OrbExtractor
+from worker.slam.features.types import Features
+from worker.slam.mapping.keyframe import KeyFrame
+from worker.slam.mapping.map import Map
+from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
+from worker.slam.tracking.motion import ConstantVelocityModel
+from worker.slam.tracking.pose_optimizer import PoseEstimate, optimize_pose
+from worker.slam.tracking.projection import KeypointIndex, search_by_projection
+from worker.slam.tracking.relocalization import pnp_against_keyframe, relocalisation_candidates
+from worker.slam.tracking.result import TrackResult
+from worker.slam.tracking.se3 import transform
+
+MIN_INIT_POINTS = 50
+
+
+class Tracker:
+    def __init__(self, camera: Camera, cfg: PipelineConfig, slam_map: Map | None = None) -> None:
+        self.camera = camera
+        self.cfg = cfg
+        self.tc = cfg.tracking
+        self.K = camera.K
+        self.bf = camera.fx * cfg.tracking.virtual_baseline_m
+        self.extractor = OrbExtractor(cfg.features)
+        self.map = slam_map if slam_map is not None else Map()
+        self.motion = ConstantVelocityModel()
+        self.ref_kf: int | None = None
+        self.local_kfs: list[int] = []
+        self.last_kf_frame = -1
+        self.last_point_ids = np.zeros(0, np.int64)
+        self.lost_streak = 0
+        #: The last successfully tracked frame's result (for the dynamic stages).
+        self.last_result: TrackResult | None = None
+
+    # ---- public ------------------------------------------------------------------------------------------
+
+    def track(self, index: int, timestamp: float, rgb: np.ndarray, depth: np.ndarray, *,
+              exclude_mask: np.ndarray | None = None, extra_features: Features | None = None,
+              restored_depth: np.ndarray | None = None, restored_rgb: np.ndarray | None = None,
+              features: Features | None = None) -> TrackResult:
+        """Track one frame. `rgb` RGB uint8 (H,W,3); `depth` float32 metres (H,W), 0 = invalid.
+
+        Plug-in points for the dynamic stages (all optional, same H,W):
+        `exclude_mask` bool: True pixels give no keypoints and are left out of the dense map;
+        `extra_features`: keypoints to add (e.g. found in restored regions; depth 0 is looked up);
+        `restored_depth` float32 metres / `restored_rgb` uint8 RGB: the frame with dynamic regions filled,
+        used for keypoint depth and the dense map instead of the raw images;
+        `features`: the frame's keypoints already extracted (and culled) by a stage, in raw coordinates; used
+        instead of extracting again (their depth is refreshed from the restored depth when there is one).
+        """
+        if restored_rgb is not None:
+            rgb = restored_rgb
+        used_depth = restored_depth if restored_depth is not None else depth
+        if features is not None:
+            feats = features
+            if restored_depth is not None and len(feats):
+                feats = feats.select(np.arange(len(feats)))
+                feats.depth = lookup_depth(feats.uv, used_depth, self.cfg.features.min_depth_m,
+                                           self.cfg.features.max_depth_m,
+                                           edge_radius=self.cfg.features.depth_edge_radius_px)
+        else:
+            gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+            feats = self.extractor.extract(gray, used_depth, exclude_mask)
+        if extra_features is not None and len(extra_features):
+            extra = extra_features.select(np.arange(len(extra_features)))
+            missing = extra.depth <= 0
+            extra.depth[missing] = lookup_depth(extra.uv[missing], used_depth, self.cfg.features.min_depth_m,
+                                                self.cfg.features.max_depth_m)
+            feats = Features.concat([feats, extra])
+        if self.camera.has_distortion and len(feats):
+            feats = self._undistort(feats)
+        dense_depth = used_depth
+        if exclude_mask is not None and restored_depth is None:
+            dense_depth = np.where(exclude_mask, 0.0, depth).astype(np.float32)
+
+        if len(self.map) == 0:
+            return self._initialise(index, timestamp, feats, rgb, dense_depth)
+
+        pred = self.motion.predict()
+        est, pids = self._track_local_map(feats, pred)
+        relocalised = False
+        if est is None:
+            est, pids = self._relocalise(feats)
+            relocalised = est is not None
+        if est is None:
+            self.lost_streak += 1
+            self.motion.reset(pred)  # keep the prediction as the last pose; forget the velocity
+            res = TrackResult(index, timestamp, pred, False, False, feats, np.full(len(feats), -1, np.int64),
+                              None, self.ref_kf if self.ref_kf is not None else 0)
+            return res
+        self.lost_streak = 0
+        if relocalised:
+            self.motion.reset(est.T_WC)
+        else:
+            self.motion.update(est.T_WC)
+        res = TrackResult(index, timestamp, est.T_WC, True, relocalised, feats, pids, est.covariance,
+                          self.ref_kf)
+        if relocalised or self._need_keyframe(res):
+            res.keyframe = self._insert_keyframe(res, rgb, dense_depth)
+            res.ref_kf = res.keyframe.id
+        self.last_point_ids = pids[pids >= 0]
+        self.last_result = res
+        return res
+
+    def _undistort(self, feats: Features) -> Features:
+        """Keypoints to ideal pinhole pixels (ORB-SLAM2 undistorts keypoints, not images)."""
+        und = cv2.undistortPoints(feats.uv.reshape(-1, 1, 2), self.K, np.asarray(self.camera.dist), P=self.K)
+        return Features(und.reshape(-1, 2).astype(np.float64), feats.octave, feats.response, feats.desc,
+                        feats.depth, uv_raw=feats.uv)
+
+    # ---- steps -------------------------------------------------------------------------------------------
+
+    def _initialise(self, index: int, timestamp: float, feats: Features, rgb: np.ndarray,
+                    dense_depth: np.ndarray) -> TrackResult:
+        T = np.eye(4)
+        res = TrackResult(index, timestamp, T, False, False, feats, np.full(len(feats), -1, np.int64), None, 0)
+        if (feats.depth > 0).sum() < MIN_INIT_POINTS:
+            return res  # wait for a frame with enough depth
+        res.ok = True
+        res.keyframe = self._insert_keyframe(res, rgb, dense_depth)
+        self.motion.reset(T)
+        self.last_result = res
+        return res
+
+    def _local_points(self) -> np.ndarray:
+        kfs = self.map.keyframes
+        parts = [kfs[i].point_ids for i in self.local_kfs] + [self.last_point_ids]
+        ids = np.concatenate(parts)
+        ids = ids[ids >= 0]
+        ids = np.unique(ids)
+        return ids[self.map.points.alive[ids]]
+
+    def _search(self, index: KeypointIndex, ids: np.ndarray, T_WC: np.ndarray, radius: float):
+        p = self.map.points
+        return search_by_projection(index, p.pos[ids], p.desc[ids], p.normal[ids], p.max_dist[ids], T_WC,
+                                    self.K, (self.camera.width, self.camera.height), self.extractor.scales,
+                                    radius, self.tc.max_hamming, self.tc.ratio)
+
+    def _optimize(self, feats: Features, ids: np.ndarray, kp: np.ndarray, T_WC: np.ndarray) -> PoseEstimate:
+        return optimize_pose(T_WC, self.map.points.pos[ids], feats.uv[kp], feats.depth[kp],
+                             self.extractor.inv_sigma2[feats.octave[kp]], self.K, self.bf, self.tc.huber_px,
+                             self.tc.ba_rounds, self.tc.ba_iterations)
+
+    def _track_local_map(self, feats: Features, T_pred: np.ndarray,
+                         wide: bool = True) -> tuple[PoseEstimate | None, np.ndarray]:
+        """Coarse search + BA from the prediction, then a fine search over the local map + BA."""
+        none = (None, np.full(len(feats), -1, np.int64))
+        if len(feats) < self.tc.min_matches:
+            return none
+        index = KeypointIndex(feats)
+        ids = self._local_points()
+        est = None
+        radii = [self.tc.search_radius_px] + ([self.tc.search_radius_px * 3] if wide else [])
+        for r in radii:
+            m = self._search(index, ids, T_pred, r)
+            if len(m.kp_idx) < self.tc.min_matches:
+                continue
+            est = self._optimize(feats, ids[m.point_idx], m.kp_idx, T_pred)
+            if est.n_inliers >= self.tc.min_matches:
+                break
+            est = None
+        if est is None:
+            return none
+        m = self._search(index, ids, est.T_WC, self.tc.refine_radius_px)
+        if len(m.kp_idx) < self.tc.min_matches:
+            return none
+        est = self._optimize(feats, ids[m.point_idx], m.kp_idx, est.T_WC)
+        if est.n_inliers < self.tc.min_matches:
+            return none
+        p = self.map.points
+        p.visible[ids[m.visible]] += 1
+        good_ids = ids[m.point_idx[est.inliers]]
+        p.found[good_ids] += 1
+        pids = np.full(len(feats), -1, np.int64)
+        pids[m.kp_idx[est.inliers]] = good_ids
+        self._update_local_keyframes(good_ids)
+        return est, pids
+
+    def _update_local_keyframes(self, tracked_ids: np.ndarray) -> None:
+        """Reference keyframe = the one that created most tracked points; local map = its neighbourhood."""
+        counts = np.bincount(self.map.points.first_kf[tracked_ids], minlength=len(self.map))
+        top = [int(i) for i in np.argsort(-counts)[: self.tc.local_map_keyframes // 2] if counts[i] > 0]
+        if not top:
+            return
+        self.ref_kf = top[0]
+        local = list(top)
+        for j in self.map.best_covisible(self.ref_kf, self.tc.local_map_keyframes):
+            if len(local) >= self.tc.local_map_keyframes:
+                break
+            if j not in local:
+                local.append(j)
+        self.local_kfs = local
+
+    def _relocalise(self, feats: Features) -> tuple[PoseEstimate | None, np.ndarray]:
+        none = (None, np.full(len(feats), -1, np.int64))
+        for kf_id in relocalisation_candidates(self.map, self.tc.reloc_keyframes, self.ref_kf):
+            got = pnp_against_keyframe(self.map, kf_id, feats, self.K, self.tc.reloc_min_inliers)
+            if got is None:
+                continue
+            saved = (self.ref_kf, self.local_kfs, self.last_point_ids)
+            self.ref_kf = kf_id
+            self.local_kfs = [kf_id] + self.map.best_covisible(kf_id, self.tc.local_map_keyframes - 1)
+            self.last_point_ids = np.zeros(0, np.int64)
+            est, pids = self._track_local_map(feats, got[0], wide=False)
+            if est is not None:
+                return est, pids
+            self.ref_kf, self.local_kfs, self.last_point_ids = saved
+        return none
+
+    def _need_keyframe(self, res: TrackResult) -> bool:
+        if not len(self.map):
+            return True
+        # ORB-SLAM2 compares with the reference keyframe's well-established points (seen by >= 3 keyframes);
+        # the newest keyframe stands in for it (it shares the most points with the current frame).
+        ref = self.map.keyframes[-1]
+        ref_pids = ref.point_ids[ref.point_ids >= 0]
+        min_obs = 3 if len(self.map) > 2 else 2
+        p = self.map.points
+        ref_tracked = int((p.alive[ref_pids] & (p.n_obs[ref_pids] >= min_obs)).sum())
+        close = (res.feats.depth > 0) & (res.feats.depth < self.tc.close_depth_m)
+        tracked = res.point_ids >= 0
+        s = KeyframeDecisionInput(res.index - self.last_kf_frame, int(tracked.sum()), ref_tracked,
+                                  int((close & tracked).sum()), int((close & ~tracked).sum()))
+        return need_keyframe(s, self.tc)
+
+    def _insert_keyframe(self, res: TrackResult, rgb: np.ndarray, dense_depth: np.ndarray) -> KeyFrame:
+        feats, pids = res.feats, res.point_ids.copy()
+        p = self.map.points
+        tracked = pids >= 0
+        p.n_obs[pids[tracked]] += 1
+        z = feats.depth
+        new = ~tracked & (z > 0) & (z < self.cfg.mapping.new_point_max_depth_m)
+        kf_id = len(self.map)
+        if new.any():
+            X_c = backproject(feats.uv[new], z[new], self.K)
+            pids[new] = p.add(transform(res.T_WC, X_c), feats.desc[new], res.T_WC[:3, 3], feats.octave[new],
+                              self.cfg.features.scale_factor, kf_id)
+        s = self.cfg.dense.stride
+        kf = KeyFrame(kf_id, res.index, res.timestamp, res.T_WC.copy(), feats, pids,
+                      rgb[::s, ::s].copy(), np.ascontiguousarray(dense_depth[::s, ::s]).copy())
+        self.map.add_keyframe(kf)
+        res.point_ids = pids
+        self.ref_kf = kf_id
+        self.local_kfs = [kf_id] + self.map.best_covisible(kf_id, self.tc.local_map_keyframes - 1)
+        self.last_kf_frame = res.index
+        return kf
+
+    def on_map_updated(self, res: TrackResult) -> None:
+        """After local BA / loop closure moved keyframes: re-anchor the motion model's last pose."""
+        if res.keyframe is not None and self.motion.last is not None:
+            self.motion.last = res.keyframe.T_WC.copy()
