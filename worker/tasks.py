@@ -1,0 +1,243 @@
+"""The job task: claim a queued job once, run the pipeline, report progress, store results.
+
+:func:`execute_job` holds the whole flow and takes a :class:`WorkerContext` (settings, sessions, store,
+the pipeline function), so tests run it directly with a fake pipeline; :func:`register_tasks` puts it on
+a huey instance under the queue contract's name (``storage.jobqueue``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import logging
+import shutil
+import socket
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from huey import Huey
+from sqlalchemy.orm import Session, sessionmaker
+
+from storage.artifacts import ArtifactStore
+from storage.errors import Conflict, NotFound, StorageError
+from storage.jobqueue import register_run_job
+from storage.models import JobStatus
+from storage.repositories import jobs, metrics, sequences
+from storage.settings import Settings
+from worker.preview import write_trajectory_preview
+from worker.runner import Cancelled, PipelineFn, RunOutput, run_slam
+
+log = logging.getLogger("worker.tasks")
+
+FRAME_CSV_COLUMNS = ("frame_index", "timestamp", "tracked", "n_features", "n_dynamic_removed", "ate_error")
+FRAME_STATS_CHUNK = 2000
+
+
+@dataclass
+class WorkerContext:
+    """What a worker process needs to run jobs; built once per process."""
+
+    settings: Settings
+    session_factory: sessionmaker[Session]
+    store: ArtifactStore
+    name: str = field(default_factory=socket.gethostname)
+    """Stored on the jobs it claims; a restarted worker of the same name fails its orphans."""
+    pipeline: PipelineFn = run_slam
+    progress_interval_s: float = 0.5
+    """Progress is written (and cancellation checked) at most this often."""
+    stopping: threading.Event = field(default_factory=threading.Event)
+    """Set when the process shuts down: running jobs stop and fail with a retryable reason."""
+
+
+class _Reporter:
+    """Throttled progress writes; the answer of each write says whether to stop."""
+
+    def __init__(self, ctx: WorkerContext, session: Session, job_id: str) -> None:
+        self.ctx, self.session, self.job_id = ctx, session, job_id
+        self.done = self.total = 0
+        self.stage = ""
+        self.last = 0.0
+        self.stop_reason: str | None = None  # "cancelled" | "stopping" | "deleted" | "ended"
+
+    def progress(self, done: int, total: int, stage: str) -> None:
+        changed = stage != self.stage
+        self.done, self.total, self.stage = done, total, stage
+        if changed or time.monotonic() - self.last >= self.ctx.progress_interval_s:
+            self.flush()
+
+    def should_cancel(self) -> bool:
+        if self.ctx.stopping.is_set() and self.stop_reason is None:
+            self.stop_reason = "stopping"
+        if self.stop_reason is None and time.monotonic() - self.last >= self.ctx.progress_interval_s:
+            self.flush()
+        return self.stop_reason is not None
+
+    def flush(self, **extra: Any) -> None:
+        self.last = time.monotonic()
+        values: dict[str, Any] = {"stage": self.stage, "frames_done": self.done, "frames_total": self.total}
+        if self.total > 0:
+            values["progress"] = 0.98 * self.done / self.total  # the rest is saving the results
+        values.update(extra)
+        try:
+            stop = jobs.update_progress(self.session, self.job_id, **values)
+        except NotFound:
+            self.stop_reason = "deleted"
+            return
+        if stop and self.stop_reason is None:
+            job = jobs.get(self.session, self.job_id)
+            self.stop_reason = "cancelled" if job.cancel_requested else "ended"
+
+
+class _JobLog(logging.Handler):
+    """Collects this thread's log records during one job (written as the job's ``log.txt``)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.INFO)
+        self.thread = threading.get_ident()
+        self.lines: list[str] = []
+        self.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.thread == self.thread and len(self.lines) < 10_000:
+            self.lines.append(self.format(record))
+
+
+def execute_job(ctx: WorkerContext, job_id: str) -> JobStatus | None:
+    """Run one job end to end; returns its final status, or None if it was not ours to run."""
+    with ctx.session_factory() as session:
+        if not jobs.claim(session, job_id, ctx.name):
+            log.info("job %s skipped: not queued any more (cancelled, deleted or claimed elsewhere)", job_id)
+            return None
+        joblog = _JobLog()
+        ours = logging.getLogger("worker")  # the task's and the pipeline's loggers
+        if ours.getEffectiveLevel() > logging.INFO:
+            ours.setLevel(logging.INFO)
+        ours.addHandler(joblog)
+        try:
+            return _run_claimed(ctx, session, job_id, joblog)
+        finally:
+            ours.removeHandler(joblog)
+
+
+def _run_claimed(ctx: WorkerContext, session: Session, job_id: str, joblog: _JobLog) -> JobStatus | None:
+    reporter = _Reporter(ctx, session, job_id)
+    out_dir = ctx.store.new_staging_dir(prefix=f"job-{job_id}-")
+    status, error = JobStatus.FAILED, None
+    timings: dict[str, Any] | None = None
+    try:
+        job = jobs.get(session, job_id)
+        seq = sequences.get(session, job.sequence_id)
+        log.info("job %s: %s on sequence %s (%s, %d frames), worker %s",
+                 job_id, job.preset, seq.name, seq.id, seq.frames, ctx.name)
+        reporter.progress(0, seq.frames, "starting")
+        t0 = time.monotonic()
+        output = ctx.pipeline(
+            ctx.store.resolve(seq.path),
+            dict(seq.camera),
+            job.preset,
+            dict(job.config or {}),
+            out_dir,
+            progress=reporter.progress,
+            should_cancel=reporter.should_cancel,
+        )
+        run_s = time.monotonic() - t0
+        reporter.progress(reporter.total, reporter.total, "saving")
+        _preview(out_dir)
+        if reporter.stop_reason == "deleted":
+            raise Cancelled("the job was deleted")
+        timings = {**(output.metrics.get("timings_ms") or {}), "run_s": round(run_s, 3)}
+        _save_results(ctx, session, job_id, out_dir, output)
+        status = JobStatus.SUCCEEDED
+        log.info("job %s succeeded in %.1f s", job_id, run_s)
+    except Cancelled as exc:
+        if reporter.stop_reason == "deleted":
+            log.info("job %s was deleted while running; its files are removed", job_id)
+            ctx.store.delete_job(job_id)
+            return None
+        if reporter.stop_reason == "stopping":
+            error = "the worker was stopped before the job finished; retry it"
+        elif reporter.stop_reason == "cancelled":
+            status, error = JobStatus.CANCELLED, str(exc) or "cancelled"
+        else:
+            error = str(exc) or "stopped"
+        log.info("job %s stopped: %s", job_id, error)
+    except NotFound as exc:  # the job (or its sequence) was deleted meanwhile
+        log.info("job %s: %s; nothing to report", job_id, exc.message)
+        ctx.store.delete_job(job_id)
+        return None
+    except Exception as exc:  # every failure becomes a failed job with a readable message
+        error = _message(exc)
+        log.error("job %s failed: %s", job_id, error)
+        joblog.lines.append(traceback.format_exc())
+    finally:
+        shutil.rmtree(out_dir, ignore_errors=True)
+    return _finish(ctx, session, job_id, status, error, timings, joblog)
+
+
+def _preview(out_dir: Path) -> None:
+    """A preview image next to the outputs; a run never fails for want of one."""
+    try:
+        write_trajectory_preview(out_dir)
+    except Exception as exc:
+        log.warning("no preview image: %s", exc)
+
+
+def _message(exc: BaseException) -> str:
+    message = getattr(exc, "message", None)
+    if isinstance(message, str) and message:
+        return message
+    return f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+
+
+def _save_results(ctx: WorkerContext, session: Session, job_id: str, out_dir: Path, output: RunOutput) -> None:
+    for path in sorted(out_dir.iterdir()):
+        if path.is_file() and not path.name.startswith("."):
+            ctx.store.put_file(job_id, path.name, path)
+    if output.frame_stats and not (out_dir / "frame_stats.csv").is_file():  # a pipeline that writes none
+        ctx.store.write_text(job_id, "frame_stats.csv", _frames_csv(output.frame_stats))
+    metrics.save_run_metrics(session, job_id, output.metrics)
+    for i in range(0, len(output.frame_stats), FRAME_STATS_CHUNK):
+        metrics.add_frame_stats(session, job_id, output.frame_stats[i : i + FRAME_STATS_CHUNK])
+    jobs.set_config(session, job_id, output.config)
+
+
+def _frames_csv(rows: list[dict[str, Any]]) -> str:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=FRAME_CSV_COLUMNS, extrasaction="ignore", lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: row.get(k, "") for k in FRAME_CSV_COLUMNS})
+    return buf.getvalue()
+
+
+def _finish(
+    ctx: WorkerContext,
+    session: Session,
+    job_id: str,
+    status: JobStatus,
+    error: str | None,
+    timings: dict[str, Any] | None,
+    joblog: _JobLog,
+) -> JobStatus | None:
+    try:
+        jobs.finish(session, job_id, status, error=error, timings=timings)
+    except NotFound:
+        ctx.store.delete_job(job_id)
+        return None
+    except Conflict as exc:  # someone else ended it (e.g. marked failed as orphaned): leave their verdict
+        log.warning("job %s: %s", job_id, exc.message)
+        return jobs.get(session, job_id).status
+    try:
+        ctx.store.write_text(job_id, "log.txt", "\n".join(joblog.lines) + "\n")
+    except (OSError, StorageError) as exc:
+        log.warning("job %s: could not write its log: %s", job_id, exc)
+    return status
+
+
+def register_tasks(huey: Huey, ctx: WorkerContext) -> Any:
+    """Register ``run_job`` on ``huey`` to execute jobs with ``ctx``; returns the task."""
+    return register_run_job(huey, lambda job_id: execute_job(ctx, job_id))
