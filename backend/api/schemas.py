@@ -1,0 +1,260 @@
+"""Response and request bodies, with the examples OpenAPI shows."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any, Generic, TypeVar
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from storage.models import Batch, Job, JobStatus, Sequence
+from storage.repositories.batches import ComparisonRow
+
+T = TypeVar("T")
+
+_SEQ_ID = "3f2c9a7e0b1d4c5e8f6a7b8c9d0e1f2a"
+_JOB_ID = "9b8a7c6d5e4f43a2b1c0d9e8f7a6b5c4"
+
+
+class SequenceOut(BaseModel):
+    id: str
+    name: str
+    frames: int
+    duration_s: float
+    has_groundtruth: bool
+    camera: dict[str, Any]
+    size_bytes: int
+    created_at: datetime
+    meta: dict[str, Any]
+    thumbnail_url: str
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "id": _SEQ_ID,
+                    "name": "rgbd_dataset_freiburg3_walking_xyz",
+                    "frames": 827,
+                    "duration_s": 28.83,
+                    "has_groundtruth": True,
+                    "camera": {"preset": "tum3"},
+                    "size_bytes": 512000000,
+                    "created_at": "2026-01-01T12:00:00Z",
+                    "meta": {"width": 640, "height": 480, "gt_poses": 2864, "source": "upload"},
+                    "thumbnail_url": f"/api/v1/sequences/{_SEQ_ID}/thumbnail",
+                }
+            ]
+        }
+    )
+
+    @classmethod
+    def of(cls, seq: Sequence) -> SequenceOut:
+        return cls(
+            id=seq.id,
+            name=seq.name,
+            frames=seq.frames,
+            duration_s=seq.duration_s,
+            has_groundtruth=seq.has_groundtruth,
+            camera=seq.camera,
+            size_bytes=seq.size_bytes,
+            created_at=seq.created_at,
+            meta=seq.meta,
+            thumbnail_url=f"/api/v1/sequences/{seq.id}/thumbnail",
+        )
+
+
+class SequenceImport(BaseModel):
+    """Register a folder already on the server (below ``VTD_IMPORT_ROOT``) without copying it."""
+
+    path: str = Field(min_length=1, max_length=1024, examples=["tum/rgbd_dataset_freiburg3_walking_xyz"])
+    camera: str | dict[str, Any] = Field(examples=["tum3"])
+    name: str | None = Field(default=None, max_length=255)
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class Page(BaseModel, Generic[T]):
+    items: list[T]
+    total: int | None = Field(description="All matching items (None where not counted).")
+    limit: int
+    offset: int
+
+
+class JobCreate(BaseModel):
+    sequence_id: str = Field(min_length=1, max_length=64, examples=[_SEQ_ID])
+    preset: str = Field(min_length=1, max_length=64, examples=["orb-only"])
+    config: dict[str, Any] | None = Field(
+        default=None,
+        description="Config overrides, nested or dotted (validated by the worker; a bad one fails the job).",
+        examples=[{"tracking.min_matches": 25, "dense": {"voxel_m": 0.02}}],
+    )
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class JobOut(BaseModel):
+    id: str
+    sequence_id: str
+    batch_id: str | None
+    preset: str
+    status: JobStatus
+    progress: float
+    stage: str
+    frames_done: int
+    frames_total: int
+    eta_s: float | None = Field(description="Estimated seconds left while running.")
+    config: dict[str, Any]
+    error: str | None
+    timings: dict[str, Any]
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    worker: str | None
+    attempts: int
+    cancel_requested: bool
+    metrics: dict[str, Any] | None = Field(description="The run's metrics.json once it succeeded.")
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "id": _JOB_ID,
+                    "sequence_id": _SEQ_ID,
+                    "batch_id": None,
+                    "preset": "orb-only",
+                    "status": "running",
+                    "progress": 0.42,
+                    "stage": "tracking",
+                    "frames_done": 347,
+                    "frames_total": 827,
+                    "eta_s": 31.5,
+                    "config": {},
+                    "error": None,
+                    "timings": {},
+                    "created_at": "2026-01-01T12:00:00Z",
+                    "started_at": "2026-01-01T12:00:01Z",
+                    "finished_at": None,
+                    "worker": "host-1",
+                    "attempts": 1,
+                    "cancel_requested": False,
+                    "metrics": None,
+                }
+            ]
+        }
+    )
+
+    @classmethod
+    def of(cls, job: Job) -> JobOut:
+        return cls(
+            id=job.id,
+            sequence_id=job.sequence_id,
+            batch_id=job.batch_id,
+            preset=job.preset,
+            status=job.status,
+            progress=job.progress,
+            stage=job.stage,
+            frames_done=job.frames_done,
+            frames_total=job.frames_total,
+            eta_s=eta_seconds(job),
+            config=job.config,
+            error=job.error,
+            timings=job.timings,
+            created_at=job.created_at,
+            started_at=job.started_at,
+            finished_at=job.finished_at,
+            worker=job.worker,
+            attempts=job.attempts,
+            cancel_requested=job.cancel_requested,
+            metrics=job.metrics.metrics if job.metrics is not None else None,
+        )
+
+
+def eta_seconds(job: Job) -> float | None:
+    if job.status != JobStatus.RUNNING or job.started_at is None or job.frames_done <= 0:
+        return None
+    elapsed = (datetime.now(UTC) - job.started_at).total_seconds()
+    left = max(0, job.frames_total - job.frames_done)
+    return round(elapsed / job.frames_done * left, 1)
+
+
+class FrameOut(BaseModel):
+    frame_index: int
+    timestamp: float
+    tracked: bool
+    n_features: int
+    n_dynamic_removed: int
+    ate_error: float | None
+    timings: dict[str, Any]
+
+
+class ArtifactOut(BaseModel):
+    name: str
+    size_bytes: int
+    content_type: str
+    url: str
+
+
+class BatchCreate(BaseModel):
+    sequence_ids: list[str] = Field(min_length=1, max_length=100, examples=[[_SEQ_ID]])
+    presets: list[str] = Field(min_length=1, max_length=20, examples=[["orb-only"]])
+    name: str = Field(default="", max_length=255, examples=["paper table 2"])
+    config: dict[str, Any] | None = Field(default=None, description="Config overrides for every job.")
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class BatchOut(BaseModel):
+    id: str
+    name: str
+    created_at: datetime
+    sequence_ids: list[str]
+    presets: list[str]
+    status: str = Field(description="queued, running, finished (all jobs ended) or empty.")
+    counts: dict[str, int] = Field(description="Jobs per status.")
+    jobs: list[JobOut]
+
+    @classmethod
+    def of(cls, batch: Batch, jobs: list[Job]) -> BatchOut:
+        counts: dict[str, int] = {}
+        for j in jobs:
+            counts[j.status.value] = counts.get(j.status.value, 0) + 1
+        if not jobs:
+            status = "empty"
+        elif all(j.status.is_terminal for j in jobs):
+            status = "finished"
+        elif any(j.status != JobStatus.QUEUED for j in jobs):
+            status = "running"
+        else:
+            status = "queued"
+        return cls(
+            id=batch.id,
+            name=batch.name,
+            created_at=batch.created_at,
+            sequence_ids=list(batch.sequence_ids),
+            presets=list(batch.presets),
+            status=status,
+            counts=counts,
+            jobs=[JobOut.of(j) for j in jobs],
+        )
+
+
+class TableRow(BaseModel):
+    sequence_id: str
+    sequence_name: str | None
+    preset: str
+    job_id: str | None
+    status: str | None
+    ate_rmse: float | None = Field(description="metres")
+    rpe_trans_rmse: float | None = Field(description="metres per RPE interval")
+    rpe_rot_rmse: float | None = Field(description="degrees per RPE interval")
+    fps: float | None
+
+    @classmethod
+    def of(cls, row: ComparisonRow) -> TableRow:
+        return cls(**row.as_dict())
+
+
+class Health(BaseModel):
+    status: str = Field(examples=["ok"])
+    version: str = Field(examples=["0.1.0"])
+    database: str = Field(examples=["ok"])

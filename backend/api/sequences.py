@@ -1,0 +1,168 @@
+"""Sequences: upload an archive (streamed to disk, validated, installed atomically), register a server
+folder, list, get, thumbnail, delete."""
+
+from __future__ import annotations
+
+import mimetypes
+import re
+from pathlib import Path
+from typing import Annotated
+
+import anyio
+from fastapi import APIRouter, Query, Request, Response, status
+from fastapi.responses import FileResponse
+from starlette.concurrency import run_in_threadpool
+
+from backend.api.deps import Auth, SessionDep, SettingsDep, StoreDep
+from backend.api.errors import error_responses
+from backend.api.schemas import Page, SequenceImport, SequenceOut
+from backend.api.upload import receive_upload
+from storage.errors import InvalidInput, NotFound
+from storage.ingest import ingest_staged, register_folder, upload_limits
+from storage.ingest.archive import remove_tree
+from storage.ingest.stream import ArchiveSink
+from storage.presets import CAMERA_PRESETS, parse_camera_spec
+from storage.repositories import sequences
+
+router = APIRouter(prefix="/sequences", tags=["sequences"])
+
+_UPLOAD_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "multipart/form-data": {
+                "schema": {
+                    "type": "object",
+                    "required": ["file", "camera"],
+                    "properties": {
+                        "file": {
+                            "type": "string",
+                            "format": "binary",
+                            "description": ".zip or .tar.gz/.tgz of a TUM-layout folder (or of its contents)",
+                        },
+                        "camera": {
+                            "type": "string",
+                            "description": f"camera preset ({', '.join(CAMERA_PRESETS)}) or JSON intrinsics",
+                            "examples": ["tum3", '{"fx":535.4,"fy":539.2,"cx":320.1,"cy":247.6}'],
+                        },
+                        "name": {"type": "string", "description": "display name (default: the file's)"},
+                    },
+                }
+            }
+        },
+    }
+}
+_ARCHIVE_SUFFIX = re.compile(r"(\.tar\.gz|\.tgz|\.zip|\.tar)$", re.IGNORECASE)
+
+
+def _default_name(filename: str | None) -> str:
+    base = Path(filename or "").name
+    return _ARCHIVE_SUFFIX.sub("", base) or "sequence"
+
+
+@router.post(
+    "",
+    status_code=status.HTTP_201_CREATED,
+    response_model=SequenceOut,
+    dependencies=[Auth],
+    openapi_extra=_UPLOAD_BODY,
+    responses=error_responses(401, 413, 422),
+    summary="Upload a sequence archive",
+)
+async def upload_sequence(
+    request: Request, session: SessionDep, store: StoreDep, settings: SettingsDep
+) -> SequenceOut:
+    """Stream the archive to disk, unpack it safely, validate the TUM layout and install it atomically.
+
+    Rejected uploads leave nothing behind (no files, no row).
+    """
+    staging = store.new_staging_dir()
+    sink = ArchiveSink(staging, upload_limits(settings))
+    try:
+        form = await receive_upload(request, sink, file_field="file", max_bytes=settings.max_upload_bytes)
+        await run_in_threadpool(sink.close)
+        if "camera" not in form.fields:
+            raise InvalidInput("the form needs a 'camera' field (a preset name or JSON intrinsics)")
+        camera = parse_camera_spec(form.fields["camera"])
+        name = (form.fields.get("name") or "").strip()[:255] or _default_name(form.filename)
+        with anyio.CancelScope(shield=True):  # once the body is in, finish even if the client leaves
+            seq = await run_in_threadpool(
+                ingest_staged, session, store, settings, staging, name=name, camera=camera
+            )
+    except BaseException:
+        with anyio.CancelScope(shield=True):  # a disconnect cancels the request: clean up regardless
+            await run_in_threadpool(sink.abort)
+        raise
+    finally:
+        with anyio.CancelScope(shield=True):
+            await run_in_threadpool(remove_tree, staging)
+    return SequenceOut.of(seq)
+
+
+@router.post(
+    "/import",
+    status_code=status.HTTP_201_CREATED,
+    response_model=SequenceOut,
+    dependencies=[Auth],
+    responses=error_responses(401, 404, 422),
+    summary="Register a folder already on the server",
+)
+def import_sequence(
+    body: SequenceImport, session: SessionDep, store: StoreDep, settings: SettingsDep
+) -> SequenceOut:
+    """The folder must lie below ``VTD_IMPORT_ROOT``; it is validated and used in place (not copied)."""
+    camera = parse_camera_spec(body.camera)
+    return SequenceOut.of(register_folder(session, store, settings, body.path, name=body.name, camera=camera))
+
+
+@router.get("", response_model=Page[SequenceOut], responses=error_responses(422))
+def list_sequences(
+    session: SessionDep,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 50,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> Page[SequenceOut]:
+    """Newest first."""
+    items = sequences.list_sequences(session, limit=limit, offset=offset)
+    return Page[SequenceOut](
+        items=[SequenceOut.of(s) for s in items], total=sequences.count(session), limit=limit, offset=offset
+    )
+
+
+@router.get("/{sequence_id}", response_model=SequenceOut, responses=error_responses(404))
+def get_sequence(sequence_id: str, session: SessionDep) -> SequenceOut:
+    return SequenceOut.of(sequences.get(session, sequence_id))
+
+
+@router.get(
+    "/{sequence_id}/thumbnail",
+    response_class=FileResponse,
+    responses={200: {"content": {"image/png": {}, "image/jpeg": {}}}, **error_responses(404)},
+)
+def get_thumbnail(sequence_id: str, session: SessionDep, store: StoreDep) -> FileResponse:
+    """The first frame's colour image, as stored."""
+    seq = sequences.get(session, sequence_id)
+    rel = seq.meta.get("thumbnail")
+    root = store.resolve(seq.path).resolve()
+    path = (root / rel).resolve() if rel else None
+    if path is None or not path.is_relative_to(root) or not path.is_file():
+        raise NotFound(f"sequence {sequence_id} has no thumbnail", {"id": sequence_id})
+    media = mimetypes.guess_type(path.name)[0] or "application/octet-stream"
+    return FileResponse(path, media_type=media, headers={"Cache-Control": "max-age=3600"})
+
+
+@router.delete(
+    "/{sequence_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    dependencies=[Auth],
+    responses=error_responses(401, 404),
+)
+def delete_sequence(sequence_id: str, session: SessionDep, store: StoreDep) -> Response:
+    """Delete the sequence, its jobs (running ones stop) and their artifacts.
+
+    A folder registered in place is left untouched on the server; only uploaded files are removed.
+    """
+    job_ids = sequences.delete(session, sequence_id)
+    for job_id in job_ids:
+        store.delete_job(job_id)
+    store.delete_sequence(sequence_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)

@@ -1,0 +1,142 @@
+"""Streaming a multipart upload to a sink: the archive never sits in memory.
+
+Starlette's own form parser spools files to the system temp dir; this one hands the ``file`` part to a
+sink of our choosing (:class:`storage.ingest.stream.ArchiveSink`: unpacks a .tar.gz on the fly, writes
+anything else into the data dir's staging area), in large blocks written off the event loop, and stops
+at ``max_bytes``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from python_multipart.exceptions import FormParserError
+from python_multipart.multipart import MultipartParser, parse_options_header
+from starlette.concurrency import run_in_threadpool
+from starlette.requests import ClientDisconnect, Request
+
+from storage.errors import InvalidInput, PayloadTooLarge
+
+WRITE_BLOCK = 4 << 20
+MAX_FIELD_BYTES = 64 * 1024
+MAX_FIELDS = 20
+
+
+@dataclass
+class UploadedForm:
+    fields: dict[str, str] = field(default_factory=dict)
+    filename: str | None = None
+    file_bytes: int = 0
+
+
+class Sink(Protocol):
+    """Takes the file part's bytes in order, in large blocks (called in a worker thread)."""
+
+    def write(self, block: bytes) -> None: ...
+
+
+class _Receiver:
+    """python-multipart callbacks: ``file`` goes to the sink in blocks; small text fields are kept."""
+
+    def __init__(self, file_field: str, max_bytes: int) -> None:
+        self.file_field = file_field
+        self.max_bytes = max_bytes
+        self.form = UploadedForm()
+        self.buffer = bytearray()
+        self._header_field = bytearray()
+        self._header_value = bytearray()
+        self._headers: dict[str, str] = {}
+        self._name: str | None = None
+        self._is_file = False
+        self._value = bytearray()
+
+    def on_part_begin(self) -> None:
+        self._headers = {}
+        self._name = None
+        self._is_file = False
+        self._value = bytearray()
+
+    def on_header_field(self, data: bytes, start: int, end: int) -> None:
+        self._header_field += data[start:end]
+
+    def on_header_value(self, data: bytes, start: int, end: int) -> None:
+        self._header_value += data[start:end]
+
+    def on_header_end(self) -> None:
+        key = self._header_field.decode("latin-1").lower()
+        self._headers[key] = self._header_value.decode("utf-8", "replace")
+        self._header_field.clear()
+        self._header_value.clear()
+
+    def on_headers_finished(self) -> None:
+        disposition, options = parse_options_header(self._headers.get("content-disposition", ""))
+        if disposition != b"form-data" or b"name" not in options:
+            raise InvalidInput("a multipart part has no form-data name")
+        self._name = options[b"name"].decode("utf-8", "replace")
+        if self._name == self.file_field:
+            if self.form.filename is not None:
+                raise InvalidInput(f"only one {self.file_field!r} part is allowed")
+            self._is_file = True
+            self.form.filename = options.get(b"filename", b"").decode("utf-8", "replace")
+        elif len(self.form.fields) >= MAX_FIELDS:
+            raise InvalidInput("too many form fields")
+
+    def on_part_data(self, data: bytes, start: int, end: int) -> None:
+        n = end - start
+        if self._is_file:
+            self.form.file_bytes += n
+            if self.form.file_bytes > self.max_bytes:
+                raise PayloadTooLarge(
+                    f"the upload is larger than {self.max_bytes} bytes", {"max_bytes": self.max_bytes}
+                )
+            self.buffer += data[start:end]
+        else:
+            self._value += data[start:end]
+            if len(self._value) > MAX_FIELD_BYTES:
+                raise InvalidInput(f"form field {self._name!r} is too long")
+
+    def on_part_end(self) -> None:
+        if not self._is_file and self._name is not None:
+            self.form.fields[self._name] = self._value.decode("utf-8", "replace")
+
+
+async def receive_upload(request: Request, sink: Sink, *, file_field: str, max_bytes: int) -> UploadedForm:
+    """Parse the multipart body of ``request``, handing the ``file_field`` part's bytes to ``sink``."""
+    ctype, options = parse_options_header(request.headers.get("content-type", ""))
+    if ctype != b"multipart/form-data" or b"boundary" not in options:
+        raise InvalidInput("the upload must be multipart/form-data", {"content_type": ctype.decode()})
+    length = request.headers.get("content-length")
+    if length is not None and length.isdigit() and int(length) > max_bytes + MAX_FIELDS * MAX_FIELD_BYTES:
+        raise PayloadTooLarge(f"the upload is larger than {max_bytes} bytes", {"max_bytes": max_bytes})
+    rx = _Receiver(file_field, max_bytes)
+    callbacks = {
+        name: getattr(rx, name)
+        for name in (
+            "on_part_begin",
+            "on_part_data",
+            "on_part_end",
+            "on_header_field",
+            "on_header_value",
+            "on_header_end",
+            "on_headers_finished",
+        )
+    }
+    parser = MultipartParser(options[b"boundary"], callbacks)  # type: ignore[arg-type]
+    try:
+        async for chunk in request.stream():
+            parser.write(chunk)
+            if len(rx.buffer) >= WRITE_BLOCK:
+                block = bytes(rx.buffer)
+                rx.buffer.clear()
+                await run_in_threadpool(sink.write, block)
+        parser.finalize()
+    except ClientDisconnect:
+        raise InvalidInput("the client disconnected during the upload") from None
+    except FormParserError as exc:
+        raise InvalidInput(f"malformed multipart body: {exc}") from None
+    if rx.buffer:
+        await run_in_threadpool(sink.write, bytes(rx.buffer))
+    if rx.form.filename is None:
+        raise InvalidInput(f"the form needs a {file_field!r} file part")
+    return rx.form

@@ -1,0 +1,34 @@
+"""Where domain errors become exit codes: 0 ok, 1 unexpected failure, 2 bad input or usage."""
+from __future__ import annotations
+
+import typer
+
+EXIT_BAD_INPUT = 2
+
+
+def _domain_error_types() -> tuple[type[Exception], ...]:
+    from storage.errors import StorageError
+    from worker.slam.errors import SlamError
+
+    return (SlamError, StorageError)
+
+
+def run_with_error_mapping(app: typer.Typer) -> int:
+    try:
+        app(standalone_mode=False)
+    except _domain_error_types() as exc:
+        typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
+        return EXIT_BAD_INPUT
+    except typer.Abort:
+        typer.secho("aborted", err=True)
+        return 1
+    except typer.Exit as exc:
+        return exc.exit_code
+    except Exception as exc:  # click usage errors carry their own exit code
+        import click
+
+        if isinstance(exc, click.ClickException):
+            exc.show()
+            return exc.exit_code
+        raise
+    return 0

@@ -1,0 +1,31 @@
+"""`vtdslam` entry point. Each subcommand lives in its own module and imports its heavy parts lazily."""
+from __future__ import annotations
+
+import sys
+
+import typer
+
+from backend.cli import augment_cmd, demo_cmd, eval_cmd, inspect_cmd, msnet_cmd, run_cmd, serve_cmd, synth_cmd, \
+    viewer_cmd, worker_cmd
+
+app = typer.Typer(
+    name="vtdslam",
+    help="VTD-SLAM: dynamic-scene RGB-D SLAM service, pipeline and tools.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+for module in (augment_cmd, demo_cmd, eval_cmd, inspect_cmd, msnet_cmd, run_cmd, serve_cmd, synth_cmd, viewer_cmd,
+               worker_cmd):
+    module.register(app)
+
+
+def main() -> None:
+    """Run the CLI; domain errors become a one-line message and exit code 2 (bad input) instead of a trace."""
+    from backend.cli.errors import run_with_error_mapping
+
+    sys.exit(run_with_error_mapping(app))
+
+
+if __name__ == "__main__":
+    main()

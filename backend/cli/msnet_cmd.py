@@ -1,0 +1,84 @@
+"""`vtdslam train-msnet` and `vtdslam eval-msnet`: train MSNET and measure a segmenter (mIoU, MPA, latency)."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    app.command("train-msnet")(train_command)
+    app.command("eval-msnet")(eval_command)
+
+
+def _shared_default() -> str:
+    return os.environ.get("VTD_SHARED_DIR", "../shared")
+
+
+def train_command(
+    config: Annotated[str, typer.Option(help="Preset (cpu, paper, smoke) or a JSON file (keys of TrainConfig; "
+                                             "optional \"preset\" base).")] = "cpu",
+    out: Annotated[Path | None, typer.Option(help="Output folder (checkpoints, metrics.jsonl).")] = None,
+    resume: Annotated[bool, typer.Option(help="Continue from OUT/last.pt.")] = False,
+    epochs: Annotated[int | None, typer.Option(help="Override the number of epochs.")] = None,
+    batch_size: Annotated[int | None, typer.Option(help="Override the batch size.")] = None,
+    lr: Annotated[float | None, typer.Option(help="Override the peak learning rate.")] = None,
+    samples_per_epoch: Annotated[int | None, typer.Option(help="Override samples per epoch.")] = None,
+    time_budget_min: Annotated[float | None, typer.Option(help="Override the wall-clock cap (minutes).")] = None,
+    shared_dir: Annotated[str | None, typer.Option(help="Shared data folder (default $VTD_SHARED_DIR or "
+                                                         "../shared).")] = None,
+    export: Annotated[Path | None, typer.Option(help="Copy the final weights here (e.g. the package's "
+                                                     "weights/msnet_default.pt).")] = None,
+    progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
+) -> None:
+    """Train MSNET: labelled YOLO-seg / COCO images, copy-paste composites, teacher distillation."""
+    from worker.slam.segmentation.train.config import load_train_config
+    from worker.slam.segmentation.train.trainer import train
+
+    cfg = load_train_config(config, out_dir=str(out) if out else None, epochs=epochs, batch_size=batch_size, lr=lr,
+                            samples_per_epoch=samples_per_epoch, time_budget_min=time_budget_min,
+                            shared_dir=shared_dir or _shared_default())
+    weights = train(cfg, resume=resume, progress=progress)
+    if export is not None:
+        export.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(weights, export)
+    typer.echo(f"weights: {export or weights}")
+
+
+def eval_command(
+    data: Annotated[Path | None, typer.Option(help="YOLO-seg folder (default: shared coco128_seg).")] = None,
+    split: Annotated[str, typer.Option(help="held-out (every n-th image, as in training) or all.")] = "held-out",
+    holdout_every: Annotated[int, typer.Option(help="n of the held-out split.")] = 5,
+    backend: Annotated[str, typer.Option(help="Segmenter backend: msnet or tflite-teacher.")] = "msnet",
+    checkpoint: Annotated[Path | None, typer.Option(help="msnet checkpoint (default: shipped).")] = None,
+    model_path: Annotated[Path | None, typer.Option(help="tflite-teacher: .tflite model.")] = None,
+    threads: Annotated[int, typer.Option(help="CPU threads.")] = 2,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the metrics as JSON.")] = False,
+) -> None:
+    """Per-class IoU and pixel accuracy, mIoU, MPA and latency of a segmenter on a labelled set."""
+    from worker.slam.segmentation.base import SegmenterConfig, make_segmenter
+    from worker.slam.segmentation.evaluate import evaluate_segmenter, labelled_samples
+    from worker.slam.segmentation.train.datasets import load_yolo_seg, split_holdout
+
+    if split not in ("held-out", "all"):
+        raise typer.BadParameter("split must be held-out or all")
+    seg = make_segmenter(SegmenterConfig(backend=backend, checkpoint=str(checkpoint) if checkpoint else None,
+                                         model_path=str(model_path) if model_path else None, threads=threads))
+    root = data or Path(_shared_default()) / "data" / "coco128_seg"
+    classes = ("background", "person", "chair")
+    items = load_yolo_seg(root, {0: "person", 56: "chair"})
+    if split == "held-out":
+        items = split_holdout(items, holdout_every)[1]
+    m = evaluate_segmenter(seg, labelled_samples(items, classes), classes)
+    if as_json:
+        typer.echo(json.dumps(m.to_dict(), indent=2))
+        return
+    typer.echo(f"{len(items)} images  mIoU {m.miou:.3f}  MPA {m.mpa:.3f}  latency {m.latency_ms:.1f} ms/image")
+    for c in classes:
+        iou, acc = m.iou[c], m.pixel_acc[c]
+        typer.echo(f"  {c:<12} IoU {'n/a' if iou is None else f'{iou:.3f}'}  "
+                   f"PA {'n/a' if acc is None else f'{acc:.3f}'}")
