@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Every benchmark table of the README's Results section, in one go (about 40 min on 2 cores).
+# Needs ../shared (or VTD_SHARED_DIR). Generated sequences go to $BENCH_DIR (default: a temp folder).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=.venv/bin/python
+SHARED="${VTD_SHARED_DIR:-$(cd .. && pwd)/shared}"
+BENCH_DIR="${BENCH_DIR:-$(mktemp -d)}"
+echo "## generated sequences in $BENCH_DIR"
+.venv/bin/vtdslam synth "$BENCH_DIR/synth" --frames 200 --people 2 > /dev/null
+.venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
+    "$BENCH_DIR/aug" > /dev/null
+echo "## SLAM core (7-Scenes redkitchen, 1000 frames)"; $PY bench/bench_slam.py
+echo "## dynamic presets"
+$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --sequence "$BENCH_DIR/synth:tum3" \
+    --sequence "$SHARED/data/7scenes_redkitchen:7scenes" --max-frames 300
+echo "## restoration"; $PY bench/bench_inpainting.py "$BENCH_DIR/synth" "$BENCH_DIR/aug" --frames 15 --camera 7scenes
+echo "## MSNET"; $PY bench/bench_msnet.py --threads 1
+echo "## generators"; $PY bench/bench_generators.py --frames 90
+echo "## upload"; $PY bench/bench_upload.py

@@ -1,0 +1,69 @@
+"""Batches: sequences x presets in one request, status, comparison table as JSON and CSV."""
+from __future__ import annotations
+
+import csv
+import io
+
+import pytest
+
+from storage.db import make_engine, make_session_factory
+from storage.models import JobStatus
+from storage.repositories import jobs, metrics
+from tests.backend.api.conftest import upload
+
+
+@pytest.fixture
+def seqs(client, seq_tgz):
+    return [upload(client, seq_tgz, name=f"s{i}").json()["id"] for i in range(2)]
+
+
+def test_create_get_and_table(client, settings, queue, seqs):
+    r = client.post("/api/v1/batches", json={"sequence_ids": seqs, "presets": ["orb-only"], "name": "ablation"})
+    assert r.status_code == 201, r.text
+    batch = r.json()
+    assert batch["status"] == "queued" and batch["counts"] == {"queued": 2} and len(batch["jobs"]) == 2
+    assert sorted(queue.ids) == sorted(j["id"] for j in batch["jobs"])
+    first = batch["jobs"][0]["id"]
+    engine = make_engine(settings)
+    with make_session_factory(engine)() as s:
+        jobs.claim(s, first, "w")
+        metrics.save_run_metrics(s, first, {"ate": {"rmse": 0.012}, "rpe": {"trans": {"rmse": 0.004},
+                                                                           "rot": {"rmse": 0.25}}, "fps": 22.5})
+        jobs.finish(s, first, JobStatus.SUCCEEDED)
+    engine.dispose()
+    got = client.get(f"/api/v1/batches/{batch['id']}").json()
+    assert got["status"] == "running" and got["counts"] == {"succeeded": 1, "queued": 1}
+    table = client.get(f"/api/v1/batches/{batch['id']}/table").json()
+    assert [(row["sequence_name"], row["preset"], row["ate_rmse"]) for row in table] == [
+        ("s0", "orb-only", 0.012), ("s1", "orb-only", None)]
+    r = client.get(f"/api/v1/batches/{batch['id']}/table?format=csv")
+    assert r.headers["content-type"].startswith("text/csv")
+    rows = list(csv.DictReader(io.StringIO(r.text)))
+    assert rows[0]["rpe_rot_rmse"] == "0.25" and rows[0]["fps"] == "22.5" and rows[1]["ate_rmse"] == ""
+    listed = client.get("/api/v1/batches").json()
+    assert [b["id"] for b in listed["items"]] == [batch["id"]]
+
+
+@pytest.mark.parametrize("body, status", [
+    ({"sequence_ids": ["nope"], "presets": ["orb-only"]}, 404),
+    ({"sequence_ids": "SEQS", "presets": ["orb-only", "hyperdrive"]}, 422),
+    ({"sequence_ids": [], "presets": ["orb-only"]}, 422),
+    ({"sequence_ids": "SEQS", "presets": []}, 422),
+    ({"sequence_ids": "SEQS"}, 422),
+    ({"sequence_ids": "SEQS", "presets": ["orb-only"], "bogus": True}, 422),
+])
+def test_bad_batches_leave_nothing(client, queue, seqs, body, status):
+    body = {k: (seqs if v == "SEQS" else v) for k, v in body.items()}
+    r = client.post("/api/v1/batches", json=body)
+    assert r.status_code == status, r.text
+    assert "error" in r.json()
+    assert client.get("/api/v1/batches").json()["items"] == []
+    assert client.get("/api/v1/jobs").json()["total"] == 0 and queue.ids == []
+
+
+def test_unknown_batch_and_bad_format(client, seqs):
+    assert client.get("/api/v1/batches/nope").status_code == 404
+    assert client.get("/api/v1/batches/nope/table").status_code == 404
+    batch = client.post("/api/v1/batches", json={"sequence_ids": seqs, "presets": ["orb-only"]}).json()
+    r = client.get(f"/api/v1/batches/{batch['id']}/table?format=xlsx")
+    assert r.status_code == 422 and r.json()["error"]["code"] == "invalid_input"

@@ -1,0 +1,29 @@
+"""Shared fixtures: where the real data lives (../shared, or VTD_SHARED_DIR) and skips when it is absent."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def shared_dir() -> Path:
+    return Path(os.environ.get("VTD_SHARED_DIR", ROOT.parent / "shared")).resolve()
+
+
+@pytest.fixture(scope="session")
+def shared() -> Path:
+    path = shared_dir()
+    if not (path / "data").is_dir():
+        pytest.skip(f"real data not found at {path} (set VTD_SHARED_DIR); a user's fresh machine has none")
+    return path
+
+
+@pytest.fixture(scope="session")
+def redkitchen(shared: Path) -> Path:
+    path = shared / "data" / "7scenes_redkitchen"
+    if not (path / "rgb.txt").is_file():
+        pytest.skip(f"{path} not present")
+    return path

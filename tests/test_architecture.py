@@ -1,0 +1,39 @@
+"""Imports go one way (DESIGN.md): import-linter's contracts from pyproject.toml, run inside the suite."""
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_import_contracts_hold():
+    exe = Path(sys.executable).with_name("lint-imports")
+    res = subprocess.run([str(exe), "--no-cache"], cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 0, res.stdout + res.stderr
+
+
+def test_api_process_does_not_import_heavy_modules():
+    code = ("import sys; from backend.app import create_app; "
+            "bad = [m for m in ('torch', 'cv2', 'worker', 'evo') if m in sys.modules]; print(bad)")
+    res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "[]"
+
+
+def test_pure_pipeline_imports_only_itself():
+    """worker/slam imports none of ours but itself (import-linter cannot name not-yet-existing siblings)."""
+    import ast
+
+    offenders = []
+    for path in (ROOT / "worker" / "slam").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                names = [node.module]
+            for name in names:
+                top = name.split(".")[0]
+                if top in {"backend", "webui", "storage"} or (top == "worker" and not name.startswith("worker.slam")):
+                    offenders.append(f"{path.relative_to(ROOT)}: {name}")
+    assert not offenders, offenders

@@ -1,0 +1,101 @@
+import cv2
+import numpy as np
+import pytest
+
+from tests.worker.slam.dynamic.scene import K, orb, pose, render, texture
+from worker.slam.dynamic.culling import CullingConfig, cull_frame
+from worker.slam.dynamic.segments import split_segments
+from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy
+
+WALL, BOARD = texture(10), texture(11, 512)
+COV = np.diag([1e-6] * 3 + [1e-6] * 3)  # a well-constrained pose: ~1 mm, ~0.06 deg
+
+
+def two_frames(board_dx: float):
+    T0, T1 = pose(0.0), pose(0.02, 0.005, 0.5)
+    f0 = render(T0, 0.0, WALL, BOARD)
+    f1 = render(T1, board_dx, WALL, BOARD)
+    return f0, f1
+
+
+def run(board_dx, mask=True, **cfg):
+    (rgb0, d0, m0), (rgb1, d1, m1) = two_frames(board_dx)
+    kp0, ds0 = orb(rgb0)
+    kp1, ds1 = orb(rgb1)
+    res = cull_frame(kp0, ds0, kp1, ds1, d1, m1 if mask else None, COV, CullingConfig(**cfg), d0, K)
+    return res, kp1, m1
+
+
+def precision_recall(removed, kp, truth, border_px=3):
+    """Recall over keypoints on the object; precision counts keypoints within `border_px` of it as correct
+    (a keypoint on the silhouette describes a patch that straddles the moving object)."""
+    def on(mask):
+        return mask[np.round(kp[:, 1]).astype(int).clip(0, mask.shape[0] - 1),
+                    np.round(kp[:, 0]).astype(int).clip(0, mask.shape[1] - 1)]
+    k = 2 * border_px + 1
+    near = on(cv2.dilate(truth.astype(np.uint8), np.ones((k, k), np.uint8)) > 0)
+    return np.sum(removed & near) / max(removed.sum(), 1), np.sum(removed & on(truth)) / max(on(truth).sum(), 1)
+
+
+def test_moving_object_is_culled_with_segmentation():
+    res, kp, truth = run(0.06)
+    assert any(s.dynamic and s.kind == "semantic" for s in res.segments)
+    p, r = precision_recall(res.removed(kp), kp, truth)
+    assert p >= 0.95 and r >= 0.95
+
+
+def test_still_object_of_dynamic_class_keeps_features():
+    res, kp, _ = run(0.0)
+    assert not any(s.dynamic for s in res.segments if s.kind == "semantic")
+    assert res.removed(kp).sum() == 0
+
+
+def test_geometry_only_finds_moving_object_without_segmentation():
+    res, kp, truth = run(0.06, mask=False, use_segmentation=False)
+    p, r = precision_recall(res.removed(kp), kp, truth)
+    assert p >= 0.8 and r >= 0.8
+
+
+def test_geometry_only_leaves_static_scene_alone():
+    res, kp, _ = run(0.0, mask=False, use_segmentation=False)
+    assert res.removed(kp).mean() < 0.02
+
+
+def test_depth_catches_motion_along_the_epipolar_line():
+    """The camera moves along x and so does the board: F alone cannot see it, reprojection with depth can."""
+    T0, T1 = pose(0.0), pose(0.03)
+    rgb0, d0, _ = render(T0, 0.0, WALL, BOARD)
+    rgb1, d1, m1 = render(T1, 0.05, WALL, BOARD)
+    kp0, ds0 = orb(rgb0)
+    kp1, ds1 = orb(rgb1)
+    with_depth = cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, CullingConfig(), d0, K)
+    without = cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, CullingConfig(use_depth=False), d0, K)
+    assert any(s.dynamic for s in with_depth.segments)
+    assert not any(s.dynamic for s in without.segments)
+
+
+def test_threshold_grows_slowly_and_is_bounded():
+    cfg = ThresholdConfig()
+    hs = np.linspace(-80, 20, 50)
+    ds = [adaptive_threshold(h, cfg) for h in hs]
+    assert np.all(np.diff(ds) >= 0)
+    assert cfg.d_min <= min(ds) and max(ds) <= cfg.d_max
+    assert adaptive_threshold(cfg.h0, cfg) == pytest.approx((cfg.d_min + cfg.d_max) / 2)
+    assert adaptive_threshold(None, ThresholdConfig(fixed=1.5)) == 1.5
+
+
+def test_entropy_of_gaussian():
+    cov = np.diag([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    expected = 0.5 * np.log((2 * np.pi * np.e) ** 6 * np.prod(np.diag(cov)))
+    assert motion_entropy(cov) == pytest.approx(expected)
+    assert motion_entropy(np.zeros((6, 6))) is None and motion_entropy(None) is None
+
+
+def test_segments_split_at_depth_jumps():
+    mask = np.zeros((100, 100), bool)
+    mask[20:80, 10:90] = True
+    depth = np.full((100, 100), 3.0, np.float32)
+    depth[:, 50:] = 1.5  # two objects touching in the image, 1.5 m apart in depth
+    labels = split_segments(mask, depth, min_area=50)
+    assert labels.max() == 2 and np.all((labels > 0) == mask)
+    assert len(np.unique(labels[20:80, 10:48])) == 1 and len(np.unique(labels[20:80, 52:90])) == 1

@@ -1,0 +1,78 @@
+"""The Segmenter protocol, the factory and both backends."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from worker.slam.errors import ConfigError
+from worker.slam.segmentation import SegmentationError, Segmenter, SegmenterConfig, available_backends, \
+    make_segmenter
+from worker.slam.segmentation.msnet import build_msnet
+from worker.slam.segmentation.msnet.checkpoint import default_checkpoint, load_model, save_model
+
+from tests.worker.slam.segmentation.test_msnet_model import TINY
+
+
+@pytest.fixture()
+def tiny_checkpoint(tmp_path: Path) -> Path:
+    path = tmp_path / "tiny.pt"
+    save_model(path, build_msnet(TINY), {"note": "test"})
+    return path
+
+
+def test_backends_registered() -> None:
+    assert set(available_backends()) >= {"msnet", "tflite-teacher"}
+    assert SegmenterConfig().backend == "msnet"
+
+
+def test_unknown_backend_and_missing_files() -> None:
+    with pytest.raises(ConfigError):
+        make_segmenter(SegmenterConfig(backend="nope"))
+    with pytest.raises(ConfigError):
+        make_segmenter(SegmenterConfig(checkpoint="/nonexistent/msnet.pt"))
+    with pytest.raises(ConfigError):
+        make_segmenter(SegmenterConfig(backend="tflite-teacher"))
+
+
+def test_msnet_backend_outputs_at_input_resolution(tiny_checkpoint: Path) -> None:
+    seg = make_segmenter(SegmenterConfig(checkpoint=str(tiny_checkpoint), device="cpu"))
+    assert isinstance(seg, Segmenter)
+    assert seg.classes == ("background", "person", "chair") and seg.dynamic_classes == ("person", "chair")
+    rgb = np.random.default_rng(0).integers(0, 255, (75, 101, 3), dtype=np.uint8)
+    res = seg.segment(rgb)
+    assert res.labels.shape == (75, 101) and res.labels.dtype == np.uint8
+    assert res.probs is not None and res.probs.shape == (75, 101, 3)
+    np.testing.assert_allclose(res.probs.sum(-1), 1.0, atol=1e-4)
+    assert res.dynamic_mask().shape == (75, 101)
+    with pytest.raises(SegmentationError):
+        seg.segment(rgb.astype(np.float32))
+
+
+def test_checkpoint_roundtrip_and_foreign_file(tiny_checkpoint: Path, tmp_path: Path) -> None:
+    model, meta = load_model(tiny_checkpoint)
+    assert model.cfg == TINY and meta == {"note": "test"}
+    bad = tmp_path / "bad.pt"
+    import torch
+
+    torch.save({"weights": 1}, bad)
+    with pytest.raises(ConfigError):
+        load_model(bad)
+
+
+def test_shipped_checkpoint_exists_and_is_small() -> None:
+    path = default_checkpoint()
+    assert path.is_file(), f"shipped weights missing: {path}"
+    assert path.stat().st_size <= 30 * 1024 * 1024
+
+
+@pytest.mark.realdata
+def test_tflite_teacher_backend(shared: Path) -> None:
+    pytest.importorskip("ai_edge_litert")
+    model = shared / "models" / "selfie_segmentation.tflite"
+    if not model.is_file():
+        pytest.skip(f"{model} not present")
+    seg = make_segmenter(SegmenterConfig(backend="tflite-teacher", model_path=str(model)))
+    res = seg.segment(np.zeros((48, 64, 3), np.uint8))
+    assert res.classes == ("background", "person") and res.labels.shape == (48, 64)

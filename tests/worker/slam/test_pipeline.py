@@ -1,0 +1,125 @@
+"""The pipeline runner: outputs, metrics, config snapshot, stage hooks, progress and cancellation; real data."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tests.worker.slam.synthetic_room import trajectory, write_sequence
+from worker.slam.camera import PRESETS
+from worker.slam.config import (PipelineConfig, get_preset, preset_names, register_preset, register_section)
+from worker.slam.errors import ConfigError
+from worker.slam.io.sequence import Sequence
+from worker.slam.io.trajectory import read_tum_trajectory
+from worker.slam.mapping.ply import read_ply
+from worker.slam.pipeline import FrameInputs, PipelineCancelled, register_stage, run_pipeline
+
+
+@pytest.fixture(scope="module")
+def room_seq(tmp_path_factory):
+    return write_sequence(tmp_path_factory.mktemp("room"), trajectory(40, yaw_span_deg=30))
+
+
+def test_run_writes_all_outputs_and_tracks_to_subcentimetre(room_seq, tmp_path):
+    calls = []
+    res = run_pipeline(Sequence(room_seq), get_preset("orb-only"), tmp_path,
+                       progress=lambda d, t, s: calls.append((d, t, s)))
+    for name in ("trajectory.txt", "keyframes.txt", "map.ply", "metrics.json", "config.json"):
+        assert (tmp_path / name).is_file(), name
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    assert m["frames"] == 40 and m["tracked"] == 40 and m["lost"] == 0
+    assert m["ate"]["rmse"] < 0.01 and set(m["ate"]) == {"rmse", "mean", "median", "std", "max"}
+    assert "rpe" in m and m["fps"] > 0 and "tracking" in m["timings_ms"] and m["peak_rss_mb"] > 0
+    assert len(read_tum_trajectory(tmp_path / "trajectory.txt")) == 40
+    xyz, rgb = read_ply(tmp_path / "map.ply")
+    assert len(xyz) == m["dense_points"] > 1000
+    cfg = PipelineConfig.from_dict(json.loads((tmp_path / "config.json").read_text()))
+    assert cfg.to_dict() == get_preset("orb-only").to_dict()
+    assert calls[0] == (1, 40, "tracking") and calls[-1][2] == "writing"
+    assert res.tracked.all()
+
+
+def test_start_and_max_frames(room_seq):
+    res = run_pipeline(Sequence(room_seq), get_preset("orb-only", {"dense.enabled": False}), start=10, max_frames=8)
+    assert res.metrics["frames"] == 8 and np.isclose(res.trajectory.timestamps[0], 10 / 30)
+    with pytest.raises(ConfigError):
+        run_pipeline(Sequence(room_seq), get_preset("orb-only"), start=1000)
+
+
+def test_cancellation_stops_the_run(room_seq):
+    seen = []
+    with pytest.raises(PipelineCancelled):
+        run_pipeline(Sequence(room_seq), get_preset("orb-only"),
+                     progress=lambda d, t, s: seen.append(d), should_cancel=lambda: len(seen) >= 3)
+    assert len(seen) == 3
+
+
+class _MaskLeftHalf:
+    """A stand-in dynamic stage: excludes the left half of every frame and reports it."""
+
+    name = "mask_left"
+
+    def process(self, frame, inputs: FrameInputs, ctx) -> FrameInputs:
+        mask = np.zeros(frame.depth.shape, bool)
+        mask[:, : frame.depth.shape[1] // 2] = True
+        inputs.exclude_mask = mask
+        inputs.info["masked_px"] = int(mask.sum())
+        if ctx.tracker.last_result is not None:
+            assert ctx.tracker.last_result.covariance is None or ctx.tracker.last_result.covariance.shape == (6, 6)
+        return inputs
+
+
+@pytest.fixture
+def isolated_registries(monkeypatch):
+    """Registrations made by a test vanish after it (other tests compare the real registries)."""
+    import worker.slam.config as config_mod
+    import worker.slam.pipeline as pipeline_mod
+
+    monkeypatch.setattr(config_mod, "_PRESETS", dict(config_mod._PRESETS))
+    monkeypatch.setattr(config_mod, "_SECTIONS", dict(config_mod._SECTIONS))
+    monkeypatch.setattr(pipeline_mod, "_STAGES", dict(pipeline_mod._STAGES))
+
+
+def test_registered_stage_and_preset_plug_in(room_seq, isolated_registries):
+    register_stage("mask_left", lambda cfg, cam: _MaskLeftHalf())
+    register_preset("test-masked", lambda: PipelineConfig(stages=["mask_left"]), "test only")
+    assert "test-masked" in preset_names()
+    res = run_pipeline(Sequence(room_seq), get_preset("test-masked", {"dense.stride": 8}), max_frames=12)
+    assert res.metrics["tracked"] == 12 and "mask_left" in res.metrics["timings_ms"]
+    assert res.metrics["stage_info"] == {"masked_px": 320 * 480}
+    for kf in res.slam_map.keyframes:  # masked pixels stay out of features and the dense map
+        assert kf.feats.uv[:, 0].min() >= 319 and not kf.depth_small[:, :40].any()
+    with pytest.raises(ConfigError):
+        run_pipeline(Sequence(room_seq), PipelineConfig(stages=["no-such-stage"]), max_frames=2)
+
+
+def test_config_snapshot_overrides_and_sections(isolated_registries):
+    from dataclasses import dataclass
+
+    @dataclass
+    class DemoSection:
+        threshold: float = 1.0
+        """A demo field."""
+
+    register_section("demo_section", DemoSection)
+    cfg = get_preset("orb-only", {"tracking.ratio": 0.8, "demo_section": {"threshold": 2}})
+    assert cfg.tracking.ratio == 0.8 and cfg.section("demo_section").threshold == 2.0
+    d = cfg.to_dict()
+    assert d["demo_section"] == {"threshold": 2.0} and d["name"] == "orb-only"
+    assert PipelineConfig.from_dict(d).to_dict() == d
+    with pytest.raises(ConfigError):
+        cfg.with_overrides({"tracking.no_such_field": 1})
+    with pytest.raises(ConfigError):
+        cfg.with_overrides({"tracking": {"min_matches": "many"}})
+    with pytest.raises(ConfigError):
+        get_preset("no-such-preset")
+
+
+@pytest.mark.realdata
+def test_redkitchen_slice_tracks_accurately(redkitchen, tmp_path):
+    res = run_pipeline(Sequence(redkitchen, PRESETS["7scenes"]), get_preset("orb-only"), tmp_path, max_frames=90)
+    m = res.metrics
+    assert m["lost"] == 0 and m["tracked"] == 90
+    assert m["ate"]["rmse"] < 0.03
+    assert m["dense_points"] > 10_000

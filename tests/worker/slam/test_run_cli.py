@@ -1,0 +1,37 @@
+"""`vtdslam run` end to end on a rendered sequence, and its errors."""
+from __future__ import annotations
+
+import json
+
+from typer.testing import CliRunner
+
+from backend.cli.main import app
+from tests.worker.slam.synthetic_room import trajectory, write_sequence
+from worker.slam.errors import CameraError, ConfigError
+
+
+def test_run_command_writes_outputs(tmp_path):
+    seq = write_sequence(tmp_path / "room", trajectory(16, yaw_span_deg=10))
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["run", str(seq), "--out", str(out), "--preset", "orb-only", "--start", "2",
+                                   "--max-frames", "12", "--config", '{"dense.stride": 8}'])
+    assert res.exit_code == 0, res.output
+    assert "tracked 12" in res.output and "ATE rmse" in res.output
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["frames"] == 12 and m["start"] == 2 and m["lost"] == 0
+    assert json.loads((out / "config.json").read_text())["dense"]["stride"] == 8
+    for name in ("trajectory.txt", "keyframes.txt", "map.ply"):
+        assert (out / name).stat().st_size > 0
+
+
+def test_run_command_errors(tmp_path):
+    seq = write_sequence(tmp_path / "room", trajectory(2))
+    (seq / "camera.json").unlink()
+    res = CliRunner().invoke(app, ["run", str(seq), "--out", str(tmp_path / "o")])
+    assert res.exit_code != 0 and isinstance(res.exception, CameraError)  # no camera anywhere
+    res = CliRunner().invoke(app, ["run", str(seq), "--camera", "tum3", "--out", str(tmp_path / "o"),
+                                   "--preset", "nope"])
+    assert res.exit_code != 0 and isinstance(res.exception, ConfigError)
+    res = CliRunner().invoke(app, ["run", str(seq), "--camera", "tum3", "--out", str(tmp_path / "o"),
+                                   "--config", "{not json"])
+    assert res.exit_code != 0 and isinstance(res.exception, ConfigError)

@@ -1,0 +1,174 @@
+"""Motion model, PnP + motion-only BA against known poses, covariance, keyframe policy, tracker on a room."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.worker.slam.synthetic_room import K_SYN, pose, render, trajectory
+from worker.slam.camera import Camera
+from worker.slam.config import TrackingConfig, get_preset
+from worker.slam.features.types import Features
+from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
+from worker.slam.tracking.motion import ConstantVelocityModel
+from worker.slam.tracking.pnp import pnp_ransac
+from worker.slam.tracking.pose_optimizer import optimize_pose, pose_entropy
+from worker.slam.tracking.se3 import exp_se3, inv, log_se3, pose_distance, transform
+from worker.slam.tracking.tracker import Tracker
+
+CAM = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, name="synthetic")
+
+
+def _scene(rng, n=300):
+    T_WC = pose([0.2, -0.1, 0.3], 20, -10)
+    Xc = np.column_stack([rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n), rng.uniform(1.0, 4.0, n)])
+    uv = Xc[:, :2] / Xc[:, 2:] * K_SYN[0, 0] + K_SYN[:2, 2]
+    return T_WC, transform(T_WC, Xc), uv, Xc[:, 2]
+
+
+def test_se3_exp_log_roundtrip():
+    xi = np.array([0.1, -0.2, 0.3, 0.2, -0.1, 0.4])
+    assert np.allclose(log_se3(exp_se3(xi)), xi)
+    T = exp_se3(xi)
+    assert np.allclose(inv(T) @ T, np.eye(4))
+
+
+def test_constant_velocity_model_predicts_constant_motion():
+    m = ConstantVelocityModel()
+    assert m.predict() is None
+    step = exp_se3(np.array([0.01, 0, 0.02, 0, 0.01, 0]))
+    T = pose([0, 0, 0], 5)
+    m.update(T)
+    assert np.allclose(m.predict(), T)  # no velocity yet: stay
+    m.update(T @ step)
+    assert np.allclose(m.predict(), T @ step @ step)
+    m.reset(T)
+    assert np.allclose(m.predict(), T)
+
+
+def test_pnp_and_motion_only_ba_recover_known_pose_with_outliers():
+    rng = np.random.default_rng(1)
+    T_WC, X, uv, z = _scene(rng)
+    uv_noisy = uv + rng.normal(0, 0.5, uv.shape)
+    outl = rng.random(len(uv)) < 0.2
+    uv_noisy[outl] += rng.uniform(-60, 60, (outl.sum(), 2))
+    T0, inl0 = pnp_ransac(X, uv_noisy, K_SYN)
+    assert pose_distance(T0, T_WC)[0] < 0.05
+    est = optimize_pose(T0, X, uv_noisy, z, np.ones(len(X)), K_SYN, bf=525 * 0.08)
+    dt, dr = pose_distance(est.T_WC, T_WC)
+    assert dt < 0.005 and np.degrees(dr) < 0.2
+    assert not est.inliers[outl].any() or est.inliers[outl].mean() < 0.05
+    assert est.inliers[~outl].mean() > 0.9
+    # covariance from the normal equations: symmetric positive definite, shrinks with more points
+    C = est.covariance
+    assert C.shape == (6, 6) and np.allclose(C, C.T) and np.all(np.linalg.eigvalsh(C) > 0)
+    half = optimize_pose(T0, X[::2], uv_noisy[::2], z[::2], np.ones(len(X[::2])), K_SYN, bf=525 * 0.08)
+    assert pose_entropy(half.covariance) > pose_entropy(C)
+
+
+def test_keyframe_policy():
+    cfg = TrackingConfig()
+    base = dict(frames_since_kf=5, tracked=400, ref_tracked=400, close_tracked=300, close_untracked=10)
+    assert not need_keyframe(KeyframeDecisionInput(**base), cfg)
+    assert need_keyframe(KeyframeDecisionInput(**{**base, "tracked": 250}), cfg)  # weak tracking
+    assert need_keyframe(KeyframeDecisionInput(**{**base, "frames_since_kf": cfg.keyframe_max_frames}), cfg)
+    assert need_keyframe(KeyframeDecisionInput(**{**base, "close_tracked": 50, "close_untracked": 200}), cfg)
+    assert not need_keyframe(KeyframeDecisionInput(**{**base, "tracked": 10}), cfg)  # too weak to anchor
+
+
+@pytest.fixture(scope="module")
+def room_run():
+    poses = trajectory(45, yaw_span_deg=40)
+    tr = Tracker(CAM, get_preset("orb-only"))
+    results = []
+    for i, T in enumerate(poses):
+        rgb, depth = render(T)
+        results.append(tr.track(i, i / 30, rgb, depth))
+    return poses, tr, results
+
+
+def test_tracker_synthetic_room_subcentimetre(room_run):
+    poses, tr, results = room_run
+    assert all(r.ok for r in results)
+    est = np.stack([r.T_WC for r in results])
+    gt = inv(poses[0]) @ poses  # the tracker's world is the first camera
+    err = np.linalg.norm(est[:, :3, 3] - gt[:, :3, 3], axis=1)
+    assert np.sqrt(np.mean(err**2)) < 0.01
+    assert results[0].keyframe is not None and len(tr.map) >= 2  # keyframes inserted along the way
+    assert all(r.covariance is not None for r in results[1:])
+
+
+def test_tracker_hooks_exclude_mask_and_extra_features():
+    poses = trajectory(6, yaw_span_deg=5)
+    tr = Tracker(CAM, get_preset("orb-only"))
+    exclude = np.zeros((480, 640), bool)
+    exclude[100:300, 200:400] = True
+    extra = Features(np.array([[250.0, 150.0], [300.0, 200.0]]), np.zeros(2, int), np.ones(2, np.float32),
+                     np.zeros((2, 32), np.uint8), np.zeros(2, np.float32))
+    for i, T in enumerate(poses):
+        rgb, depth = render(T)
+        restored = depth.copy()
+        res = tr.track(i, i / 30, rgb, depth, exclude_mask=exclude, extra_features=extra, restored_depth=restored)
+        own = res.feats.uv[:-2]
+        inside = (own[:, 0] >= 200) & (own[:, 0] < 400) & (own[:, 1] >= 100) & (own[:, 1] < 300)
+        assert not inside.any()
+        assert np.allclose(res.feats.uv[-2:], extra.uv) and (res.feats.depth[-2:] > 0).all()
+        assert res.ok
+
+
+def test_relocalisation_after_a_jump():
+    poses = trajectory(12, yaw_span_deg=10)
+    tr = Tracker(CAM, get_preset("orb-only"))
+    for i, T in enumerate(poses[:8]):
+        rgb, depth = render(T)
+        assert tr.track(i, i / 30, rgb, depth).ok
+    # a wild motion-model prediction (as after a dropped stretch of frames) forces relocalisation
+    tr.motion.reset(pose([1.5, 0.5, -1.0], 120))
+    rgb, depth = render(poses[9])
+    res = tr.track(9, 9 / 30, rgb, depth)
+    assert res.ok and res.relocalised
+    assert pose_distance(res.T_WC, inv(poses[0]) @ poses[9])[0] < 0.02
+
+
+def test_tracker_undistorts_keypoints_of_a_distorted_camera():
+    import cv2
+
+    dist = np.array([0.2, -0.5, 0.001, -0.001, 0.3])
+    cam = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, dist=tuple(dist), name="distorted")
+    v, u = np.mgrid[0:480, 0:640].astype(np.float64)
+    und = cv2.undistortPoints(np.stack([u, v], -1).reshape(-1, 1, 2), K_SYN, dist, P=K_SYN).reshape(480, 640, 2)
+    mx, my = und[..., 0].astype(np.float32), und[..., 1].astype(np.float32)
+    poses = trajectory(20, yaw_span_deg=15)
+    tr = Tracker(cam, get_preset("orb-only"))
+    est = []
+    for i, T in enumerate(poses):
+        rgb, depth = render(T)
+        rgb_d = cv2.remap(rgb, mx, my, cv2.INTER_LINEAR)  # what a distorted lens sees
+        depth_d = cv2.remap(depth, mx, my, cv2.INTER_NEAREST)
+        res = tr.track(i, i / 30, rgb_d, depth_d)
+        assert res.ok
+        est.append(res.T_WC)
+    assert res.feats.uv_raw is not None and not np.allclose(res.feats.uv, res.feats.uv_raw)
+    gt = inv(poses[0]) @ poses
+    err = np.linalg.norm(np.stack(est)[:, :3, 3] - gt[:, :3, 3], axis=1)
+    assert np.sqrt(np.mean(err**2)) < 0.01
+
+
+@pytest.mark.realdata
+def test_relocalisation_on_real_frames(redkitchen):
+    from worker.slam.camera import PRESETS
+    from worker.slam.io.sequence import Sequence
+
+    seq = Sequence(redkitchen, PRESETS["7scenes"])
+    gt = seq.groundtruth.poses
+    tr = Tracker(seq.camera, get_preset("orb-only"))
+    for i in range(0, 60, 2):
+        f = seq[i]
+        res = tr.track(i, f.timestamp, f.rgb, f.depth)
+        assert res.ok
+    # a wrong prediction (90 degrees off, 0.5 m away) makes the projection search fail -> relocalise
+    tr.motion.reset(res.T_WC @ np.array([[0, -1, 0, 0.5], [1, 0, 0, 0], [0, 0, 1, 0.3], [0, 0, 0, 1.0]]))
+    f = seq[25]
+    res = tr.track(25, f.timestamp, f.rgb, f.depth)
+    assert res.ok and res.relocalised
+    dt, dr = pose_distance(res.T_WC, inv(gt[0]) @ gt[25])
+    assert dt < 0.03 and np.degrees(dr) < 2
