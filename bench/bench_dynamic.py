@@ -45,6 +45,8 @@ def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, override
         "psnr": rt.get("restoration_psnr"), "depth_err": rt.get("restoration_depth_median_m"),
         "seg_ms": m["timings_ms"].get("segmentation"), "cull_ms": m["timings_ms"].get("culling"),
         "rest_ms": m["timings_ms"].get("restoration"), "fps": m.get("fps"),
+        "decision_ms": cull.get("decision_ms_median"),
+        "guided": f"{cull['guided_matching_frames']}/{cull['frames_compared']}" if "frames_compared" in cull else "–",
     }
 
 
@@ -58,8 +60,8 @@ def main() -> None:
     overrides = json.loads(args.config) if args.config else None
     print("| sequence | preset | frames | tracked | ATE rmse (m) | RPE t (m/s) | RPE r (°/s) | static feats/frame "
           "| removed/frame | restored feats/frame | dyn. precision | dyn. recall | mask IoU | restore PSNR (dB) "
-          "| restore depth err (cm) | seg ms | cull ms | restore ms | fps |")
-    print("|" + "---|" * 19)
+          "| restore depth err (cm) | seg ms | cull ms (with ORB) | cull decision ms | guided frames | restore ms | fps |")
+    print("|" + "---|" * 21)
     for spec in args.sequence:
         seq_dir, _, camera = spec.rpartition(":")
         for preset in args.presets.split(","):
@@ -68,7 +70,8 @@ def main() -> None:
                   f"{_fmt(r['rpe_t'], 4)} | {_fmt(r['rpe_r'], 2)} | {_fmt(r['kept'], 0)} | {_fmt(r['removed'], 1)} | "
                   f"{_fmt(r['restored_feats'], 1)} | {_fmt(r['precision'], 2)} | {_fmt(r['recall'], 2)} | "
                   f"{_fmt(r['iou'], 2)} | {_fmt(r['psnr'], 1)} | {_fmt(r['depth_err'], 1, 100)} | "
-                  f"{_fmt(r['seg_ms'], 1)} | {_fmt(r['cull_ms'], 1)} | {_fmt(r['rest_ms'], 1)} | {_fmt(r['fps'], 1)} |",
+                  f"{_fmt(r['seg_ms'], 1)} | {_fmt(r['cull_ms'], 1)} | {_fmt(r['decision_ms'], 1)} | {r['guided']} | "
+                  f"{_fmt(r['rest_ms'], 1)} | {_fmt(r['fps'], 1)} |",
                   flush=True)
 
 

@@ -14,9 +14,11 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from worker.slam.dynamic.epipolar import epipolar_distance, fundamental_ransac, match_orb
+from worker.slam.dynamic.epipolar import (Matches, epipolar_distance, fundamental_ransac, match_guided,
+                                          match_orb, predict_positions)
 from worker.slam.dynamic.segments import split_segments
 from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy
+from worker.slam.features.search import KeypointIndex
 
 
 @dataclass(frozen=True)
@@ -32,8 +34,20 @@ class CullingConfig:
     rarely match across frames) and removes static ones too."""
     ransac_px: float = 1.0
     """RANSAC inlier threshold of the fundamental matrix (pixels)."""
+    fit_max_points: int = 200
+    """The depth test's pose is fitted on at most this many static matches (evenly picked): with ~80 %
+    inliers more points make RANSAC slower, not the pose better; every match is then scored. (F keeps all
+    static matches: on a nearly planar static scene a subset left it ill-determined in the tests.)"""
     match_max_distance: int = 50
     """Hamming distance above which ORB matches are dropped."""
+    guided_radius_px: float = 24.0
+    """Search radius around a keypoint's predicted position when the relative pose is predicted (doubled for
+    keypoints without depth). Wide enough for the prediction error and for people moving ~10 px per frame."""
+    object_margin_px: float = 64.0
+    """Previous keypoints are brute-force matched to the objects' keypoints when their predicted position
+    falls within this margin of the objects' bounding box (the object's own motion over `lag_frames`)."""
+    guided_min_matches: int = 40
+    """Fewer guided matches than this (a bad prediction) → brute-force cross-checked matching instead."""
     use_depth: bool = True
     """Add the reprojection test with the previous frame's depth."""
     pnp_px: float = 2.0
@@ -80,6 +94,8 @@ class CullingResult:
     matches: int
     scores: np.ndarray
     cur_points: np.ndarray
+    guided: bool = False
+    """True when the matches came from the pose-guided search (False: brute force)."""
 
     def removed(self, keypoints_xy: np.ndarray) -> np.ndarray:
         """bool (M,): which of the current frame's keypoints (M, 2) fall in the excluded region."""
@@ -103,8 +119,8 @@ def _scores(p_prev, p_cur, static, prev_depth, K, config) -> np.ndarray:
         yi = np.clip(np.round(p_prev[:, 1]).astype(int), 0, h - 1)
         z = prev_depth[yi, xi]
         has = z > 0
-        usable = has & static
-        if usable.sum() >= 6:
+        usable = _spread(np.flatnonzero(has & static), config.fit_max_points)
+        if len(usable) >= 6:
             X = np.stack([(p_prev[:, 0] - K[0, 2]) / K[0, 0] * z, (p_prev[:, 1] - K[1, 2]) / K[1, 1] * z, z], 1)
             ok, rvec, tvec, inl = cv2.solvePnPRansac(X[usable], p_cur[usable].astype(np.float64), K, None,
                                                      reprojectionError=config.pnp_px,
@@ -114,6 +130,11 @@ def _scores(p_prev, p_cur, static, prev_depth, K, config) -> np.ndarray:
                 err = np.linalg.norm(proj.reshape(-1, 2) - p_cur[has], axis=1)
                 score[has] = np.maximum(score[has], err / config.reprojection_scale)
     return score
+
+
+def _spread(idx: np.ndarray, n: int) -> np.ndarray:
+    """At most `n` of `idx`, evenly spaced (deterministic, and spread over the keypoint order)."""
+    return idx if len(idx) <= n else idx[np.linspace(0, len(idx) - 1, n).astype(int)]
 
 
 def _geometric_clusters(p_cur, moving, depth, covered, config) -> list[np.ndarray]:
@@ -151,23 +172,27 @@ def _geometric_clusters(p_cur, moving, depth, covered, config) -> list[np.ndarra
 def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, desc_cur: np.ndarray,
                depth_cur: np.ndarray, potentially_dynamic: np.ndarray | None, pose_cov: np.ndarray | None,
                config: CullingConfig = CullingConfig(), prev_depth: np.ndarray | None = None,
-               K: np.ndarray | None = None) -> CullingResult:
+               K: np.ndarray | None = None, T_cur_prev: np.ndarray | None = None) -> CullingResult:
     """Judge the objects of the current frame.
 
     `kp_*` (N, 2) pixel coordinates (x, y) with ORB `desc_*` (N, 32) uint8; `depth_cur` float32 m (H, W);
     `potentially_dynamic` bool (H, W) from segmentation (None in geometry-only mode); `pose_cov` the 6x6
-    covariance of the previous pose estimate (for Δd); `prev_depth` + `K` enable the reprojection test.
+    covariance of the previous pose estimate (for Δd); `prev_depth` + `K` enable the reprojection test;
+    `T_cur_prev` (4x4, X_cur = T X_prev), the predicted relative pose, enables guided matching.
     """
     h, w = depth_cur.shape
     entropy = motion_entropy(pose_cov)
     thr = adaptive_threshold(entropy, config.threshold)
-    m = match_orb(desc_prev, desc_cur, config.match_max_distance)
-    p_prev, p_cur = kp_prev[m.prev_idx].astype(np.float64), kp_cur[m.cur_idx].astype(np.float64)
-    xi = np.clip(np.round(p_cur[:, 0]).astype(int), 0, w - 1)
-    yi = np.clip(np.round(p_cur[:, 1]).astype(int), 0, h - 1)
     use_sem = config.use_segmentation and potentially_dynamic is not None
     labels = split_segments(potentially_dynamic, depth_cur, config.min_segment_area, config.depth_jump) \
         if use_sem else np.zeros((h, w), np.int32)
+    # Keypoints on objects are matched exhaustively (a search radius would keep only their small motions and
+    # bias the decision towards "static"); the static rest, when a pose is predicted, by the guided search.
+    on_object = labels[_pixel(kp_cur[:, 1], h), _pixel(kp_cur[:, 0], w)] > 0 if use_sem \
+        else np.ones(len(kp_cur), bool)
+    m = _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur_prev, config)
+    p_prev, p_cur = kp_prev[m.prev_idx].astype(np.float64), kp_cur[m.cur_idx].astype(np.float64)
+    xi, yi = _pixel(p_cur[:, 0], w), _pixel(p_cur[:, 1], h)
     point_label = labels[yi, xi]
     scores = _scores(p_prev, p_cur, point_label == 0, prev_depth, K, config) if len(p_prev) >= 8 \
         else np.zeros(len(p_prev))
@@ -192,4 +217,45 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
             dynamic |= region
     k = 2 * config.dilation_px + 1
     exclude = cv2.dilate(dynamic.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
-    return CullingResult(dynamic, exclude, decisions, thr, entropy, len(p_prev), scores, p_cur)
+    return CullingResult(dynamic, exclude, decisions, thr, entropy, len(p_prev), scores, p_cur, m.guided)
+
+
+@dataclass(frozen=True)
+class _FrameMatches(Matches):
+    guided: bool = False
+
+
+def _pixel(coord: np.ndarray, size: int) -> np.ndarray:
+    return np.clip(np.round(coord).astype(int), 0, size - 1)
+
+
+def _near_box(pred: np.ndarray, pts: np.ndarray, margin: float) -> np.ndarray:
+    """Indices of predicted positions (N,2) within `margin` px of the bounding box of `pts` (M,2)."""
+    if len(pts) == 0:
+        return np.zeros(0, int)
+    lo, hi = pts.min(0) - margin, pts.max(0) + margin
+    with np.errstate(invalid="ignore"):
+        return np.flatnonzero(((pred >= lo) & (pred <= hi)).all(1))
+
+
+def _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur_prev, config) -> _FrameMatches:
+    """Brute force for the current keypoints `on_object` (M,) bool, guided for the others when a relative pose
+    is predicted and enough guided matches are found; brute force for everything otherwise."""
+    static = np.flatnonzero(~on_object)
+    if T_cur_prev is not None and K is not None and prev_depth is not None and len(kp_prev) and len(static):
+        h, w = prev_depth.shape
+        z = prev_depth[_pixel(kp_prev[:, 1], h), _pixel(kp_prev[:, 0], w)]
+        g = match_guided(kp_prev.astype(np.float64), z, desc_prev,
+                         KeypointIndex.of_points(kp_cur[static], desc_cur[static]), T_cur_prev, K,
+                         config.guided_radius_px, config.match_max_distance)
+        if len(g.prev_idx) >= config.guided_min_matches:
+            obj = np.flatnonzero(on_object)
+            near = _near_box(predict_positions(kp_prev.astype(np.float64), z, T_cur_prev, K), kp_cur[obj],
+                             config.object_margin_px)
+            b = match_orb(desc_prev[near], desc_cur[obj], config.match_max_distance)
+            b_prev = near[b.prev_idx]
+            free = ~np.isin(b_prev, g.prev_idx)  # a previous keypoint matched twice keeps its guided match
+            return _FrameMatches(np.concatenate([g.prev_idx, b_prev[free]]),
+                                 np.concatenate([static[g.cur_idx], obj[b.cur_idx[free]]]), True)
+    m = match_orb(desc_prev, desc_cur, config.match_max_distance)
+    return _FrameMatches(m.prev_idx, m.cur_idx, False)

@@ -1,10 +1,18 @@
-"""Matches between consecutive frames, the fundamental matrix from static matches, epipolar distances."""
+"""Matches between two frames, the fundamental matrix from static matches, epipolar distances.
+
+Matching is guided when the tracker can predict the relative pose: each previous keypoint is projected into
+the current frame (with its depth, or at infinity without) and matched among the current keypoints near the
+prediction. This is a k-d tree query per point instead of a brute-force N×M descriptor comparison, and the
+search radius also leaves room for the object motion that culling is looking for.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
+from worker.slam.features.search import KeypointIndex, match_near_predictions
 
 
 @dataclass(frozen=True)
@@ -22,6 +30,35 @@ def match_orb(desc_prev: np.ndarray, desc_cur: np.ndarray, max_distance: int = 5
     ms = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True).match(desc_prev, desc_cur)
     ms = [m for m in ms if m.distance <= max_distance]
     return Matches(np.array([m.queryIdx for m in ms], int), np.array([m.trainIdx for m in ms], int))
+
+
+def predict_positions(uv_prev: np.ndarray, z_prev: np.ndarray, T_cur_prev: np.ndarray,
+                      K: np.ndarray) -> np.ndarray:
+    """Where (N,2) keypoints `uv_prev` px of the previous frame appear in the current one under `T_cur_prev`
+    (4x4, X_cur = T X_prev): back-projected with depth `z_prev` (N,) m, or as directions (at infinity, so
+    only the rotation moves them) where the depth is 0. Points that land behind the camera get NaN."""
+    rays = np.column_stack([(uv_prev[:, 0] - K[0, 2]) / K[0, 0], (uv_prev[:, 1] - K[1, 2]) / K[1, 1],
+                            np.ones(len(uv_prev))])
+    has = z_prev > 0
+    X = rays @ T_cur_prev[:3, :3].T
+    X[has] += T_cur_prev[:3, 3] / z_prev[has, None]  # (R z ray + t) / z: the same direction, scaled
+    z = X[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = np.column_stack([K[0, 0] * X[:, 0] / z + K[0, 2], K[1, 1] * X[:, 1] / z + K[1, 2]])
+    uv[z <= 1e-6] = np.nan
+    return uv
+
+
+def match_guided(uv_prev: np.ndarray, z_prev: np.ndarray, desc_prev: np.ndarray, cur: KeypointIndex,
+                 T_cur_prev: np.ndarray, K: np.ndarray, radius_px: float = 24.0, max_distance: int = 50,
+                 ratio: float = 0.9) -> Matches:
+    """Matches of previous keypoints (N,2) px, depth (N,) m, ORB (N,32) to the current frame's keypoints
+    (`cur`) within `radius_px` of their predicted positions (twice that without depth: no parallax known)."""
+    pred = predict_positions(uv_prev, z_prev, T_cur_prev, K)
+    inside = np.flatnonzero(np.isfinite(pred).all(1))
+    radius = np.where(z_prev[inside] > 0, radius_px, 2 * radius_px)
+    pi, ci = match_near_predictions(cur, pred[inside], desc_prev[inside], radius, max_distance, ratio)
+    return Matches(inside[pi], ci)
 
 
 def fundamental_ransac(p_prev: np.ndarray, p_cur: np.ndarray, threshold_px: float = 1.0,

@@ -6,6 +6,7 @@ the previous frame and hands the tracker the features outside moving objects plu
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -17,6 +18,7 @@ from worker.slam.dynamic.culling import CullingConfig, cull_frame
 from worker.slam.features.types import Features
 from worker.slam.io.sequence import Frame
 from worker.slam.segmentation.base import SegmenterConfig, make_segmenter
+from worker.slam.tracking.se3 import inv
 from worker.slam.truth import TruthScores
 
 
@@ -39,6 +41,16 @@ class CullingStageConfig:
     0.6 px), 6.3 px over 10 frames (static: 1.0 px), so a longer baseline separates them."""
 
 
+@dataclass
+class _PastFrame:
+    """A frame kept for comparison; `T_WC` is filled in once the tracker has estimated it (None if lost)."""
+
+    index: int
+    feats: Features
+    depth: np.ndarray
+    T_WC: np.ndarray | None = None
+
+
 class SegmentationStage:
     name = "segmentation"
 
@@ -59,9 +71,11 @@ class CullingStage:
         self.cfg: CullingStageConfig = config.section("culling")
         self.use_segmentation = "segmentation" in config.stages
         self.camera = camera
-        self.history: deque[tuple[Features, np.ndarray]] = deque(maxlen=max(1, self.cfg.lag_frames))
+        self.history: deque[_PastFrame] = deque(maxlen=max(1, self.cfg.lag_frames))
         self.scores: TruthScores | None = None
         self.removed_total = self.kept_total = 0
+        self.compared = self.guided = 0
+        self.decision_ms: list[float] = []  # cull_frame alone: the stage also extracts the frame's ORB
         self.last = None  # this frame's CullingResult, None when nothing was compared (bench/plot_culling.py)
 
     def process(self, frame: Frame, inputs, ctx):
@@ -71,17 +85,26 @@ class CullingStage:
         gray = cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY)
         feats = ctx.tracker.extractor.extract(gray, frame.depth)
         removed = np.zeros(len(feats), bool)
+        last = ctx.tracker.last_result
+        if self.history and last is not None and last.ok and last.index == self.history[-1].index:
+            self.history[-1].T_WC = last.T_WC
         if self.history and len(feats):
-            prev_feats, prev_depth = self.history[0]  # the oldest kept: `lag_frames` back
-            last = ctx.tracker.last_result
+            past = self.history[0]  # the oldest kept: `lag_frames` back
+            prev_feats, prev_depth = past.feats, past.depth
             cov = last.covariance if last is not None else None
+            T_pred = ctx.tracker.motion.predict()
+            T_cur_prev = inv(T_pred) @ past.T_WC if T_pred is not None and past.T_WC is not None else None
             cfg = self.cfg.culling
             if not self.use_segmentation:
                 cfg = dataclasses.replace(cfg, use_segmentation=False)
+            t0 = time.perf_counter()
             res = cull_frame(prev_feats.uv, prev_feats.desc, feats.uv, feats.desc, frame.depth,
                              inputs.potentially_dynamic if self.use_segmentation else None, cov, cfg,
-                             prev_depth, self.camera.K)
+                             prev_depth, self.camera.K, T_cur_prev)
+            self.decision_ms.append(1000 * (time.perf_counter() - t0))
             removed = res.removed(feats.uv)
+            self.compared += 1
+            self.guided += res.guided
             self.last = res
             inputs.exclude_mask = res.exclude_mask
             inputs.dynamic_mask = res.dynamic_mask
@@ -105,11 +128,13 @@ class CullingStage:
         inputs.info.update(features_removed=int(removed.sum()), features_kept=int((~removed).sum()))
         self.removed_total += int(removed.sum())
         self.kept_total += int((~removed).sum())
-        self.history.append((feats, frame.depth))
+        self.history.append(_PastFrame(frame.index, feats, frame.depth))
         return inputs
 
     def summary(self) -> dict:
-        out = {"features_removed": self.removed_total, "features_kept": self.kept_total}
+        out = {"features_removed": self.removed_total, "features_kept": self.kept_total,
+               "frames_compared": self.compared, "guided_matching_frames": self.guided,
+               "decision_ms_median": float(np.median(self.decision_ms)) if self.decision_ms else None}
         if self.scores is not None:
             out["truth"] = {k: v for k, v in self.scores.summary().items() if k != "restoration_psnr"}
         return out

@@ -1,5 +1,5 @@
-"""ORB features with a scale pyramid, grid-balanced distribution and per-keypoint depth."""
-from worker.slam.features.orb import OrbExtractor
-from worker.slam.features.types import Features
+"""ORB features with a scale pyramid, grid-balanced distribution and per-keypoint depth; keypoint search.
 
-__all__ = ["Features", "OrbExtractor"]
+Import the modules directly (`features.orb`, `features.types`, `features.search`): this package imports
+nothing on its own, so the dynamic stages can use `types`/`search` without pulling in the pipeline config.
+"""

@@ -4,12 +4,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from worker.slam.features.matching import hamming
-from worker.slam.features.types import Features
-
-K_NEAREST = 8
+from worker.slam.features.search import KeypointIndex, match_near_predictions
 
 
 @dataclass
@@ -20,14 +16,6 @@ class ProjectionMatches:
     point_idx: np.ndarray
     kp_idx: np.ndarray
     visible: np.ndarray
-
-
-class KeypointIndex:
-    """A k-d tree over one frame's keypoints, built once per frame and reused by every search."""
-
-    def __init__(self, feats: Features) -> None:
-        self.feats = feats
-        self.tree = cKDTree(feats.uv) if len(feats) else None
 
 
 def search_by_projection(index: KeypointIndex, X_w: np.ndarray, desc: np.ndarray, normal: np.ndarray,
@@ -65,25 +53,6 @@ def search_by_projection(index: KeypointIndex, X_w: np.ndarray, desc: np.ndarray
     nl = len(scales)
     level = np.clip(np.ceil(np.log(max_dist[idx] / dist[idx]) / np.log(scales[1] if nl > 1 else 1.2)), 0, nl - 1)
     level = level.astype(int)
-    r = radius_px * scales[level]
-    k = min(K_NEAREST, len(feats))
-    d, cand = index.tree.query(np.column_stack([u[idx], v[idx]]), k=k, distance_upper_bound=float(r.max()))
-    d, cand = d.reshape(len(idx), k), cand.reshape(len(idx), k)
-    ok = cand < len(feats)
-    cand_c = np.where(ok, cand, 0)
-    oct_ = feats.octave[cand_c]
-    ok &= (d <= r[:, None]) & (oct_ >= level[:, None] - 1) & (oct_ <= level[:, None] + 1)
-    if taken is not None:
-        ok &= ~taken[cand_c]
-    hd = np.where(ok, hamming(desc[idx][:, None, :], feats.desc[cand_c]), 10_000)
-    order = np.argsort(hd, axis=1)
-    best = np.take_along_axis(hd, order[:, :1], 1)[:, 0]
-    second = np.take_along_axis(hd, order[:, 1:2], 1)[:, 0] if k > 1 else np.full(len(idx), 10_000)
-    best_kp = np.take_along_axis(cand_c, order[:, :1], 1)[:, 0]
-    good = (best <= max_hamming) & ((second >= 10_000) | (best < ratio * second))
-    pi, ki, bd = idx[good], best_kp[good], best[good]
-    # one point per keypoint: keep the lowest descriptor distance
-    o = np.argsort(bd, kind="stable")
-    _, first = np.unique(ki[o], return_index=True)
-    keep = o[first]
-    return ProjectionMatches(pi[keep], ki[keep], vis)
+    pi, ki = match_near_predictions(index, np.column_stack([u[idx], v[idx]]), desc[idx],
+                                    radius_px * scales[level], max_hamming, ratio, level=level, taken=taken)
+    return ProjectionMatches(idx[pi], ki, vis)

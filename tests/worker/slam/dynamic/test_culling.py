@@ -18,11 +18,13 @@ def two_frames(board_dx: float):
     return f0, f1
 
 
-def run(board_dx, mask=True, **cfg):
+def run(board_dx, mask=True, predicted=False, **cfg):
     (rgb0, d0, m0), (rgb1, d1, m1) = two_frames(board_dx)
     kp0, ds0 = orb(rgb0)
     kp1, ds1 = orb(rgb1)
-    res = cull_frame(kp0, ds0, kp1, ds1, d1, m1 if mask else None, COV, CullingConfig(**cfg), d0, K)
+    # the tracker's prediction is never exact: 5 mm and 0.3 deg off the true relative pose
+    T_cur_prev = pose(0.005, 0.0, 0.3) @ np.linalg.inv(pose(0.02, 0.005, 0.5)) @ pose(0.0) if predicted else None
+    res = cull_frame(kp0, ds0, kp1, ds1, d1, m1 if mask else None, COV, CullingConfig(**cfg), d0, K, T_cur_prev)
     return res, kp1, m1
 
 
@@ -42,6 +44,21 @@ def test_moving_object_is_culled_with_segmentation():
     assert any(s.dynamic and s.kind == "semantic" for s in res.segments)
     p, r = precision_recall(res.removed(kp), kp, truth)
     assert p >= 0.95 and r >= 0.95
+
+
+@pytest.mark.parametrize("board_dx", [0.0, 0.06])
+def test_guided_matching_decides_like_brute_force(board_dx):
+    guided, kp, truth = run(board_dx, predicted=True)
+    brute, _, _ = run(board_dx)
+    assert guided.guided and not brute.guided
+    assert guided.matches >= 0.8 * brute.matches
+    assert [s.dynamic for s in guided.segments] == [s.dynamic for s in brute.segments]
+    assert np.array_equal(guided.removed(kp), brute.removed(kp))
+
+
+def test_guided_matching_falls_back_to_brute_force_on_a_bad_prediction():
+    res, _, _ = run(0.06, predicted=True, guided_radius_px=0.5)  # nothing lies that close: too few matches
+    assert not res.guided and any(s.dynamic for s in res.segments)
 
 
 def test_still_object_of_dynamic_class_keeps_features():
@@ -99,3 +116,18 @@ def test_segments_split_at_depth_jumps():
     labels = split_segments(mask, depth, min_area=50)
     assert labels.max() == 2 and np.all((labels > 0) == mask)
     assert len(np.unique(labels[20:80, 10:48])) == 1 and len(np.unique(labels[20:80, 52:90])) == 1
+
+
+def test_predicted_positions_follow_depth_and_rotation():
+    from worker.slam.dynamic.epipolar import predict_positions
+    uv = np.array([[100.0, 80.0], [320.0, 240.0], [500.0, 400.0]])
+    z = np.array([1.0, 2.0, 0.0])  # the last one has no depth: a direction
+    assert np.allclose(predict_positions(uv, z, np.eye(4), K), uv)
+    T = pose(0.1, 0.0, 2.0)  # X_cur = T X_prev
+    X = np.column_stack([(uv[:2, 0] - K[0, 2]) / K[0, 0] * z[:2], (uv[:2, 1] - K[1, 2]) / K[1, 1] * z[:2], z[:2]])
+    Xc = X @ T[:3, :3].T + T[:3, 3]
+    expected = np.column_stack([K[0, 0] * Xc[:, 0] / Xc[:, 2] + K[0, 2], K[1, 1] * Xc[:, 1] / Xc[:, 2] + K[1, 2]])
+    H = K @ T[:3, :3] @ np.linalg.inv(K)  # points at infinity move by the rotation's homography
+    h = H @ np.array([uv[2, 0], uv[2, 1], 1.0])
+    got = predict_positions(uv, z, T, K)
+    assert np.allclose(got[:2], expected) and np.allclose(got[2], h[:2] / h[2])
