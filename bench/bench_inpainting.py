@@ -4,7 +4,7 @@ For frames of a dynamic sequence with truth (`vtdslam synth` / `vtdslam augment`
 is the hole; references are chosen online (past 15 frames) with ground-truth poses, so the figures isolate the
 restoration from tracking errors. Prints RGB PSNR and depth error inside the holes, hole size and time/frame.
 
-    .venv/bin/python bench/bench_inpainting.py SEQ_DIR [SEQ_DIR ...] [--frames 30] [--camera tum3]
+    .venv/bin/python bench/bench_inpainting.py SEQ_DIR [SEQ_DIR ...] [--frames 30] [--camera tum3] [--speed]
 """
 from __future__ import annotations
 
@@ -74,11 +74,41 @@ def bench_sequence(root: Path, camera: str, n_frames: int, offline: bool) -> dic
     return {k: float(np.nanmean(v)) for k, v in rows.items()} | {"frames": len(picks)}
 
 
+def bench_speed(root: Path, camera: str, index: int = 60) -> None:
+    """Time per frame against hole size: a person-like ellipse at the image centre of one frame, restored with
+    three past references (geometry covers what they see) and with none (PatchMatch from the frame itself, the
+    worst case). CPU time of the process (numba runs on one thread), so the figures hold on a loaded machine
+    too; PSNR against the true background inside the hole."""
+    seq, truth = Sequence(root, parse_camera(camera)), load_truth(root)
+    gt_idx, gt_poses = seq.groundtruth_for_frames()
+    pose = dict(zip(gt_idx.tolist(), gt_poses))
+    f = seq[index]
+    h, w = f.depth.shape
+    refs = [ReferenceView(seq[j].rgb, seq[j].depth, pose[j], truth.mask(j))
+            for j in (index - 15, index - 10, index - 5)]
+    print(f"\n| {root.name} frame {index} | hole % | refs | seen by refs % | CPU ms/frame | PSNR (dB) |")
+    print("|---|---|---|---|---|---|")
+    for frac in (0.05, 0.10, 0.15, 0.25):
+        a = np.sqrt(frac * h * w / np.pi / 2.5)
+        hole = cv2.ellipse(np.zeros((h, w), np.uint8), (w // 2, h // 2), (int(a), int(2.5 * a)),
+                           0, 0, 360, 1, -1) > 0
+        for rr in (refs, []):
+            ts = []
+            for _ in range(3):
+                t0 = time.process_time()
+                out = restore_frame(f.rgb, f.depth, hole, pose[index], rr, seq.camera.K)
+                ts.append(time.process_time() - t0)
+            print(f"| | {100 * hole.mean():.1f} | {len(rr)} | "
+                  f"{100 * out.seen_by_reference.sum() / hole.sum():.0f} | {1000 * np.median(ts):.0f} | "
+                  f"{restoration_psnr(out.rgb, truth.background_rgb(index), hole):.2f} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("sequences", nargs="+", type=Path)
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--camera", default="tum3", help="preset when the sequence has no camera.json")
+    ap.add_argument("--speed", action="store_true", help="also time restoration against hole size")
     args = ap.parse_args()
     print("| sequence | mode | frames | hole % | refs | hole seen by refs % | PSNR all (dB) | PSNR seen | "
           "PSNR unseen | Telea PSNR | depth median err (cm) | depth err seen (cm) | depth restored % | ms/frame |")
@@ -90,6 +120,9 @@ def main() -> None:
                   f"{r['refs']:.1f} | {100 * r['seen']:.0f} | {r['pm_psnr']:.2f} | {r['seen_psnr']:.2f} | "
                   f"{r['unseen_psnr']:.2f} | {r['telea_psnr']:.2f} | {100 * r['pm_depth_med']:.2f} | "
                   f"{100 * r['depth_seen']:.2f} | {100 * r['depth_valid']:.0f} | {r['ms']:.0f} |", flush=True)
+    if args.speed:
+        for root in args.sequences:
+            bench_speed(root, args.camera)
 
 
 if __name__ == "__main__":
