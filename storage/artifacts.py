@@ -164,6 +164,14 @@ class ArtifactStore:
     def delete_job(self, job_id: str) -> None:
         shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
 
+    def delete_staging(self, prefix: str) -> None:
+        """Remove staging folders named ``prefix*`` (a dead worker's scratch space for one job)."""
+        folder = self.root / "staging"
+        if not folder.is_dir() or not _ID.match(prefix.rstrip("-")):
+            return
+        for path in folder.glob(f"{prefix}*"):
+            shutil.rmtree(path, ignore_errors=True)
+
     def delete_sequence(self, seq_id: str) -> None:
         shutil.rmtree(self.sequence_dir(seq_id), ignore_errors=True)
 

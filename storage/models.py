@@ -117,7 +117,9 @@ class Job(Base):
     heartbeat_at: Mapped[datetime | None]  # last sign of life of the running worker (claim, progress)
     finished_at: Mapped[datetime | None]
     worker: Mapped[str | None] = mapped_column(String(255))
-    attempts: Mapped[int] = mapped_column(default=1)  # how many times it was queued (1 + retries)
+    attempts: Mapped[int] = mapped_column(default=1)  # how many times it was queued (1 + retries + requeues)
+    # automatic requeues after its worker died (bounded by Settings.requeue_orphans; a manual retry resets it)
+    requeues: Mapped[int] = mapped_column(default=0, server_default="0")
     cancel_requested: Mapped[bool] = mapped_column(default=False)
 
     sequence: Mapped[Sequence] = relationship(back_populates="jobs")

@@ -31,6 +31,10 @@ class Settings(BaseSettings):
     """Read-only real data (datasets, weights) shared between checkouts."""
     import_root: Path | None = None
     """Server folder below which sequences may be registered in place; None disables it."""
+    cors_origins: list[str] = []
+    """Browser origins (``https://host:port``, or ``*``) allowed to call the api cross-origin; empty (the
+    default) sends no CORS headers, so only pages served by the api itself can use it from a browser.
+    From the environment as JSON: ``VTD_CORS_ORIGINS='["https://dash.example"]'``."""
 
     max_upload_bytes: int = Field(default=4 * GIB, gt=0)
     max_files: int = Field(default=200_000, gt=0)
@@ -42,6 +46,13 @@ class Settings(BaseSettings):
     viewer_port: int = Field(default=8080, ge=1, le=65535)
     heartbeat_timeout_s: float = Field(default=120.0, gt=0)
     """A running job whose worker has not reported for this long is failed (workers check every 1/4 of it)."""
+    requeue_orphans: int = Field(default=0, ge=0)
+    """How often a job whose worker died (orphaned or stale) is requeued automatically before it is failed."""
+
+    def __repr_args__(self) -> Any:
+        # URLs keep their shape in logs and reprs, never their passwords
+        for name, value in super().__repr_args__():
+            yield name, mask_url(value) if name in _URL_FIELDS and isinstance(value, str) else value
 
     @property
     def resolved_database_url(self) -> str:
@@ -54,6 +65,21 @@ class Settings(BaseSettings):
     def queue_path(self) -> Path:
         """The huey SQLite file used when no ``queue_url`` is set."""
         return self.data_dir / "queue.db"
+
+
+_URL_FIELDS = ("database_url", "queue_url")
+
+
+def mask_url(url: str) -> str:
+    """``url`` with the password of its ``user:password@`` part replaced by ``***``.
+
+    Up to the *last* '@': raw passwords may hold '@' or '/'; masking too much is harmless, too little is not.
+    """
+    scheme, sep, rest = url.partition("://")
+    userinfo, at, tail = rest.rpartition("@")
+    if not sep or not at or ":" not in userinfo:
+        return url
+    return f"{scheme}://{userinfo.split(':', 1)[0]}:***@{tail}"
 
 
 def get_settings(**overrides: Any) -> Settings:

@@ -1,15 +1,15 @@
 """The worker process: a huey consumer (threads) running :func:`worker.tasks.execute_job`.
 
-On start it migrates the database and fails the jobs its previous incarnation left running (same
-worker name); queued jobs wait in the persistent queue (SQLite file or Redis) and are picked up. On
-SIGINT/SIGTERM running jobs stop at the next frame, are marked failed ("retry it"), and it exits.
+On start it takes a name no live worker on the data directory holds (:mod:`worker.identity`), migrates
+the database and reaps the jobs its previous incarnation left running (:mod:`worker.reaping`); queued
+jobs wait in the persistent queue (SQLite file or Redis) and are picked up. On SIGINT/SIGTERM running
+jobs stop at the next frame, are marked failed ("retry it"), and it exits.
 """
 
 from __future__ import annotations
 
 import logging
 import socket
-import threading
 from typing import Any
 
 from huey import Huey
@@ -20,6 +20,8 @@ from storage.db import init_db, make_engine, make_session_factory
 from storage.queue import make_huey
 from storage.repositories import jobs
 from storage.settings import Settings
+from worker.identity import claim_name
+from worker.reaping import reap_orphans, reap_stale, start_reaper
 from worker.runner import PipelineFn, run_slam
 from worker.tasks import WorkerContext, register_tasks
 
@@ -39,42 +41,21 @@ def build_context(settings: Settings, *, name: str | None = None, pipeline: Pipe
 
 
 def make_worker_huey(settings: Settings, ctx: WorkerContext, **kwargs: Any) -> Huey:
+    """The queue with ``run_job`` registered; ``ctx.enqueue`` then requeues through the same task."""
     huey = make_huey(settings, **kwargs)
-    register_tasks(huey, ctx)
+    task = register_tasks(huey, ctx)
+    ctx.enqueue = lambda job_id: task(job_id)  # never a second registration: it would replace the body
     return huey
 
 
 def fail_orphans(ctx: WorkerContext) -> list[str]:
-    """Jobs this worker name left running when its process died are marked failed (retryable)."""
-    with ctx.session_factory() as session:
-        failed = jobs.fail_orphaned(
-            session, worker=ctx.name, error=f"the worker ({ctx.name}) stopped before the job finished; retry it"
-        )
-    for job_id in failed:
-        log.warning("job %s was left running by a previous worker %s: marked failed", job_id, ctx.name)
-    return failed
+    """Jobs this worker name left running when its process died: requeued or failed; their ids."""
+    return reap_orphans(ctx).all
 
 
 def fail_stale(ctx: WorkerContext, timeout_s: float) -> list[str]:
-    """Jobs of any worker that stopped reporting (killed, machine lost) are marked failed (retryable)."""
-    with ctx.session_factory() as session:
-        failed = jobs.fail_stale(session, older_than_s=timeout_s)
-    for job_id in failed:
-        log.warning("job %s: its worker stopped reporting for %.0f s: marked failed", job_id, timeout_s)
-    return failed
-
-
-def _reaper(ctx: WorkerContext, timeout_s: float) -> threading.Thread:
-    def loop() -> None:
-        while not ctx.stopping.wait(timeout_s / 4):
-            try:
-                fail_stale(ctx, timeout_s)
-            except Exception:  # a database hiccup must not kill the worker; the next round retries
-                log.exception("checking for stale jobs failed")
-
-    thread = threading.Thread(target=loop, name="stale-job-reaper", daemon=True)
-    thread.start()
-    return thread
+    """Jobs of any worker that stopped reporting: requeued or failed; their ids."""
+    return reap_stale(ctx, timeout_s).all
 
 
 class _StoppingConsumer(Consumer):
@@ -98,10 +79,12 @@ def run_consumer(
     poll_max_delay_s: float = 1.0,
 ) -> None:
     """Run the consumer in this process until a signal stops it."""
-    ctx = build_context(settings, name=name, pipeline=pipeline)
-    fail_orphans(ctx)
-    _reaper(ctx, settings.heartbeat_timeout_s)
-    huey = make_worker_huey(settings, ctx)
+    identity = claim_name(settings.data_dir, name)  # held until the process exits
+    ctx = build_context(settings, name=identity.name, pipeline=pipeline)
+    huey = make_worker_huey(settings, ctx)  # before reaping: requeued orphans go back on this queue
+    reap_orphans(ctx)
+    identity.touch()
+    start_reaper(ctx, settings.heartbeat_timeout_s, alive=identity.touch)
     consumer = _StoppingConsumer(
         huey,
         ctx,
@@ -115,4 +98,7 @@ def run_consumer(
     queue = settings.queue_url.split(":", 1)[0] if settings.queue_url else f"sqlite {settings.queue_path}"
     database = (settings.database_url or "sqlite").split(":", 1)[0]  # never log credentials
     log.info("worker %s: %d thread(s), queue %s, database %s", ctx.name, workers, queue, database)
-    consumer.run()
+    try:
+        consumer.run()
+    finally:
+        identity.release()

@@ -1,5 +1,9 @@
 """The job task: claim a queued job once, run the pipeline, report progress, store results.
 
+While a job runs, a heartbeat thread marks it alive (so a silent stage is never taken for a dead worker),
+and every write is tied to the claimed attempt: a worker whose job was reaped meanwhile (requeued, maybe
+running elsewhere) stores nothing and leaves the new attempt alone.
+
 :func:`execute_job` holds the whole flow and takes a :class:`WorkerContext` (settings, sessions, store,
 the pipeline function), so tests run it directly with a fake pipeline; :func:`register_tasks` puts it on
 a huey instance under the queue contract's name (``storage.jobqueue``).
@@ -8,6 +12,7 @@ a huey instance under the queue contract's name (``storage.jobqueue``).
 from __future__ import annotations
 
 import csv
+import errno
 import io
 import logging
 import shutil
@@ -15,6 +20,7 @@ import socket
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -51,13 +57,20 @@ class WorkerContext:
     """Progress is written (and cancellation checked) at most this often."""
     stopping: threading.Event = field(default_factory=threading.Event)
     """Set when the process shuts down: running jobs stop and fail with a retryable reason."""
+    enqueue: Callable[[str], None] | None = None
+    """Puts a job id on the queue (set by the consumer; reaping requeues orphans through it)."""
+    heartbeat_interval_s: float | None = None
+    """A running job is marked alive this often even when the pipeline is silent (a long global BA);
+    None: a quarter of ``settings.heartbeat_timeout_s``, so a live job is never taken for a dead one."""
 
 
 class _Reporter:
     """Throttled progress writes; the answer of each write says whether to stop."""
 
-    def __init__(self, ctx: WorkerContext, session: Session, job_id: str) -> None:
-        self.ctx, self.session, self.job_id = ctx, session, job_id
+    def __init__(self, ctx: WorkerContext, session: Session, job_id: str, attempt: int,
+                 lost: threading.Event) -> None:
+        self.ctx, self.session, self.job_id, self.attempt = ctx, session, job_id, attempt
+        self.lost = lost  # set by the heartbeat when the job stopped being ours
         self.done = self.total = 0
         self.stage = ""
         self.last = 0.0
@@ -72,7 +85,8 @@ class _Reporter:
     def should_cancel(self) -> bool:
         if self.ctx.stopping.is_set() and self.stop_reason is None:
             self.stop_reason = "stopping"
-        if self.stop_reason is None and time.monotonic() - self.last >= self.ctx.progress_interval_s:
+        due = time.monotonic() - self.last >= self.ctx.progress_interval_s
+        if self.stop_reason is None and (due or self.lost.is_set()):
             self.flush()
         return self.stop_reason is not None
 
@@ -83,13 +97,43 @@ class _Reporter:
             values["progress"] = 0.98 * self.done / self.total  # the rest is saving the results
         values.update(extra)
         try:
-            stop = jobs.update_progress(self.session, self.job_id, **values)
+            stop = jobs.update_progress(self.session, self.job_id, attempt=self.attempt, **values)
         except NotFound:
             self.stop_reason = "deleted"
             return
         if stop and self.stop_reason is None:
             job = jobs.get(self.session, self.job_id)
-            self.stop_reason = "cancelled" if job.cancel_requested else "ended"
+            mine = job.status == JobStatus.RUNNING and job.attempts == self.attempt
+            self.stop_reason = "cancelled" if job.cancel_requested and mine else "ended"
+
+
+class _Heartbeat:
+    """Marks the running job alive from its own thread (and session) while the pipeline may be silent."""
+
+    def __init__(self, ctx: WorkerContext, job_id: str, attempt: int) -> None:
+        self.ctx, self.job_id, self.attempt = ctx, job_id, attempt
+        self.interval = ctx.heartbeat_interval_s or ctx.settings.heartbeat_timeout_s / 4
+        self.lost = threading.Event()
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name=f"heartbeat-{job_id}", daemon=True)
+
+    def __enter__(self) -> _Heartbeat:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._done.set()
+        self._thread.join()
+
+    def _loop(self) -> None:
+        with self.ctx.session_factory() as session:
+            while not self._done.wait(self.interval):
+                try:
+                    if not jobs.heartbeat(session, self.job_id, self.attempt):
+                        self.lost.set()  # reaped, deleted or ended: the reporter finds out which
+                        return
+                except Exception as exc:  # a database hiccup: the next beat retries
+                    log.warning("job %s: heartbeat failed: %s", self.job_id, exc)
 
 
 class _JobLog(logging.Handler):
@@ -118,16 +162,22 @@ def execute_job(ctx: WorkerContext, job_id: str) -> JobStatus | None:
             ours.setLevel(logging.INFO)
         ours.addHandler(joblog)
         try:
-            return _run_claimed(ctx, session, job_id, joblog)
+            # Nothing but reaping changes attempts of a running job, and not within milliseconds.
+            attempt = jobs.get(session, job_id).attempts
+            with _Heartbeat(ctx, job_id, attempt) as beat:
+                return _run_claimed(ctx, session, job_id, attempt, beat.lost, joblog)
         finally:
             ours.removeHandler(joblog)
 
 
-def _run_claimed(ctx: WorkerContext, session: Session, job_id: str, joblog: _JobLog) -> JobStatus | None:
-    reporter = _Reporter(ctx, session, job_id)
+def _run_claimed(
+    ctx: WorkerContext, session: Session, job_id: str, attempt: int, lost: threading.Event, joblog: _JobLog
+) -> JobStatus | None:
+    reporter = _Reporter(ctx, session, job_id, attempt, lost)
     out_dir = ctx.store.new_staging_dir(prefix=f"job-{job_id}-")
     status, error = JobStatus.FAILED, None
     timings: dict[str, Any] | None = None
+    saving = False
     try:
         job = jobs.get(session, job_id)
         seq = sequences.get(session, job.sequence_id)
@@ -147,9 +197,10 @@ def _run_claimed(ctx: WorkerContext, session: Session, job_id: str, joblog: _Job
         run_s = time.monotonic() - t0
         reporter.progress(reporter.total, reporter.total, "saving")
         _preview(out_dir)
-        if reporter.stop_reason == "deleted":
-            raise Cancelled("the job was deleted")
+        if reporter.stop_reason in ("deleted", "ended"):  # not ours any more: store nothing
+            raise Cancelled("the job was deleted" if reporter.stop_reason == "deleted" else "the job was reaped")
         timings = {**(output.metrics.get("timings_ms") or {}), "run_s": round(run_s, 3)}
+        saving = True
         _save_results(ctx, session, job_id, out_dir, output)
         status = JobStatus.SUCCEEDED
         log.info("job %s succeeded in %.1f s", job_id, run_s)
@@ -165,6 +216,8 @@ def _run_claimed(ctx: WorkerContext, session: Session, job_id: str, joblog: _Job
         else:
             error = str(exc) or "stopped"
         log.info("job %s stopped: %s", job_id, error)
+        if reporter.stop_reason == "ended":  # reaped (maybe requeued): its files are not ours to touch
+            return _finish(ctx, session, job_id, attempt, status, error, None, joblog)
     except NotFound as exc:  # the job (or its sequence) was deleted meanwhile
         log.info("job %s: %s; nothing to report", job_id, exc.message)
         ctx.store.delete_job(job_id)
@@ -173,9 +226,22 @@ def _run_claimed(ctx: WorkerContext, session: Session, job_id: str, joblog: _Job
         error = _message(exc)
         log.error("job %s failed: %s", job_id, error)
         joblog.lines.append(traceback.format_exc())
+        if saving:  # a failed job shows no half of a result (e.g. the disk filled up mid-save)
+            _discard_results(ctx, session, job_id, attempt)
     finally:
         shutil.rmtree(out_dir, ignore_errors=True)
-    return _finish(ctx, session, job_id, status, error, timings, joblog)
+    return _finish(ctx, session, job_id, attempt, status, error, timings, joblog)
+
+
+def _discard_results(ctx: WorkerContext, session: Session, job_id: str, attempt: int) -> None:
+    try:
+        job = jobs.get(session, job_id)
+        if job.status != JobStatus.RUNNING or job.attempts != attempt:
+            return  # reaped meanwhile: the reaper cleaned up, and a new attempt's files are not ours
+        ctx.store.delete_job(job_id)
+        jobs.discard_results(session, job_id)
+    except Exception as exc:  # the job still fails; its partial results are what remains
+        log.warning("job %s: could not remove its partial results: %s", job_id, exc)
 
 
 def _preview(out_dir: Path) -> None:
@@ -187,6 +253,9 @@ def _preview(out_dir: Path) -> None:
 
 
 def _message(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return (f"disk full: no space left for the job's files in the data directory ({exc.strerror}); "
+                "free space and retry the job")
     message = getattr(exc, "message", None)
     if isinstance(message, str) and message:
         return message
@@ -218,13 +287,14 @@ def _finish(
     ctx: WorkerContext,
     session: Session,
     job_id: str,
+    attempt: int,
     status: JobStatus,
     error: str | None,
     timings: dict[str, Any] | None,
     joblog: _JobLog,
 ) -> JobStatus | None:
     try:
-        jobs.finish(session, job_id, status, error=error, timings=timings)
+        jobs.finish(session, job_id, status, error=error, timings=timings, attempt=attempt)
     except NotFound:
         ctx.store.delete_job(job_id)
         return None

@@ -1,12 +1,14 @@
 """Jobs and their state machine.
 
 queued → running (claim) → succeeded | failed | cancelled (finish); queued → cancelled (request_cancel);
-failed | cancelled → queued (retry). Transitions are conditional UPDATEs checked by rowcount, so two
+failed | cancelled → queued (retry); running → queued | failed (reaped: its worker died). Transitions are conditional UPDATEs checked by rowcount, so two
 workers or a worker and the api racing on one job can never both win.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+from datetime import timedelta
 from typing import Any, cast
 
 from sqlalchemy import ColumnElement, func, select, update
@@ -143,6 +145,15 @@ def claim(session: Session, job_id: str, worker: str) -> bool:
         )
 
 
+def _ours(attempt: int | None) -> list[ColumnElement[bool]]:
+    """The condition that a running job is still the claim ``attempt`` of its worker.
+
+    A worker whose job was reaped (and maybe requeued and claimed by another worker) keeps running until
+    it notices; matching the attempt keeps that zombie from touching the new attempt's row.
+    """
+    return [] if attempt is None else [Job.attempts == attempt]
+
+
 def set_config(session: Session, job_id: str, config: dict[str, Any]) -> None:
     """Store the full config snapshot the run actually uses."""
     with writing(session):
@@ -159,11 +170,13 @@ def update_progress(
     frames_done: int | None = None,
     frames_total: int | None = None,
     timings: dict[str, Any] | None = None,
+    attempt: int | None = None,
 ) -> bool:
     """Report progress of a running job (``progress`` clamped to 0..1).
 
-    Returns True when the worker should stop: a cancel was requested or the job is no longer running.
-    Raises :class:`NotFound` if the job was deleted meanwhile.
+    Returns True when the worker should stop: a cancel was requested, the job is no longer running or
+    (with ``attempt``) it is no longer the attempt this worker claimed. Raises :class:`NotFound` if the
+    job was deleted meanwhile.
     """
     values: dict[str, Any] = {"heartbeat_at": utcnow()}  # every report is also a heartbeat
     if progress is not None:
@@ -178,13 +191,22 @@ def update_progress(
         values["timings"] = timings
     with writing(session):
         if values:
-            _transition(session, job_id, Job.status == JobStatus.RUNNING, **values)
+            _transition(session, job_id, Job.status == JobStatus.RUNNING, *_ours(attempt), **values)
         row = session.execute(
-            select(Job.status, Job.cancel_requested).where(Job.id == job_id)
+            select(Job.status, Job.cancel_requested, Job.attempts).where(Job.id == job_id)
         ).one_or_none()
     if row is None:
         raise NotFound(f"job {job_id} not found", {"id": job_id})
-    return bool(row.cancel_requested) or row.status != JobStatus.RUNNING
+    lost = attempt is not None and row.attempts != attempt
+    return bool(row.cancel_requested) or row.status != JobStatus.RUNNING or lost
+
+
+def heartbeat(session: Session, job_id: str, attempt: int | None = None) -> bool:
+    """Mark a running job alive (its worker is busy in a long stage); False if it is not ours any more."""
+    with writing(session):
+        return _transition(
+            session, job_id, Job.status == JobStatus.RUNNING, *_ours(attempt), heartbeat_at=utcnow()
+        )
 
 
 def is_cancel_requested(session: Session, job_id: str) -> bool:
@@ -222,8 +244,12 @@ def finish(
     *,
     error: str | None = None,
     timings: dict[str, Any] | None = None,
+    attempt: int | None = None,
 ) -> Job:
-    """End a queued or running job as succeeded, failed or cancelled (with ``error`` text)."""
+    """End a queued or running job as succeeded, failed or cancelled (with ``error`` text).
+
+    With ``attempt`` only that claim of the job may end it (:class:`Conflict` otherwise).
+    """
     try:
         status = JobStatus(status)
     except ValueError:
@@ -236,11 +262,32 @@ def finish(
     if timings is not None:
         values["timings"] = timings
     with writing(session):
-        done = _transition(session, job_id, Job.status.in_(ACTIVE), **values)
+        done = _transition(session, job_id, Job.status.in_(ACTIVE), *_ours(attempt), **values)
     job = get(session, job_id)
     if not done:
+        if attempt is not None and job.attempts != attempt:
+            raise Conflict(f"job {job_id} was requeued (attempt {job.attempts}); attempt {attempt} ended",
+                           {"status": job.status.value, "attempts": job.attempts})
         raise Conflict(f"job {job_id} is already {job.status.value}", {"status": job.status.value})
     return job
+
+
+REQUEUED_STAGE = "requeued: its worker died"
+"""The stage a requeued job shows until a worker starts it again."""
+
+# A job back in the queue looks like a new one (attempts aside).
+_FRESH: dict[str, Any] = {
+    "progress": 0.0,
+    "stage": "",
+    "frames_done": 0,
+    "frames_total": 0,
+    "error": None,
+    "timings": {},
+    "started_at": None,
+    "heartbeat_at": None,
+    "finished_at": None,
+    "worker": None,
+}
 
 
 def retry(session: Session, job_id: str) -> Job:
@@ -255,15 +302,8 @@ def retry(session: Session, job_id: str) -> Job:
             Job.status.in_(RETRYABLE),
             status=JobStatus.QUEUED,
             attempts=Job.attempts + 1,
-            progress=0.0,
-            stage="",
-            frames_done=0,
-            frames_total=0,
-            error=None,
-            timings={},
-            started_at=None,
-            finished_at=None,
-            worker=None,
+            requeues=0,  # a manual retry is a fresh start with a fresh budget of automatic requeues
+            **_FRESH,
             cancel_requested=False,
         )
         if done:
@@ -278,29 +318,91 @@ def retry(session: Session, job_id: str) -> Job:
     return job
 
 
+@dataclass
+class Reaped:
+    """What reaping did to the running jobs of dead workers."""
+
+    failed: list[str] = field(default_factory=list)
+    requeued: list[str] = field(default_factory=list)
+    """Back to queued (attempts + 1): the caller must put them on the queue again."""
+
+    @property
+    def all(self) -> list[str]:
+        return [*self.requeued, *self.failed]
+
+
+def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeue_limit: int) -> Reaped:
+    """Requeue (up to ``requeue_limit`` times per job) or fail the running jobs matching ``conds``.
+
+    Both are conditional UPDATEs on ``status = running`` in one transaction, so two reapers racing
+    (every worker runs one) requeue or fail each job once.
+    """
+    running = [Job.status == JobStatus.RUNNING, *conds]
+    reaped = Reaped()
+    with writing(session):
+        if requeue_limit > 0:
+            stmt = (
+                update(Job)
+                .where(*running, Job.requeues < requeue_limit, Job.cancel_requested.is_(False))
+                .values(status=JobStatus.QUEUED, attempts=Job.attempts + 1, requeues=Job.requeues + 1,
+                        **{**_FRESH, "stage": REQUEUED_STAGE})
+                .returning(Job.id)
+                .execution_options(synchronize_session=False)
+            )
+            reaped.requeued = list(session.scalars(stmt))
+            if reaped.requeued:  # a worker killed while saving may have stored some
+                session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id.in_(reaped.requeued)))
+                session.execute(sql_delete(FrameStat).where(FrameStat.job_id.in_(reaped.requeued)))
+        stmt = (
+            update(Job)
+            .where(*running)
+            .values(status=JobStatus.FAILED, finished_at=utcnow(), error=error)
+            .returning(Job.id)
+            .execution_options(synchronize_session=False)
+        )
+        reaped.failed = list(session.scalars(stmt))
+        if reaped.failed:  # a failed job never shows the half of a result
+            session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id.in_(reaped.failed)))
+            session.execute(sql_delete(FrameStat).where(FrameStat.job_id.in_(reaped.failed)))
+    return reaped
+
+
+def reap_orphaned(
+    session: Session,
+    *,
+    worker: str | None = None,
+    error: str = "the worker stopped before the job finished",
+    requeue_limit: int = 0,
+) -> Reaped:
+    """Requeue or fail jobs left running by a worker that died; call it when a worker starts.
+
+    ``worker`` limits it to jobs claimed under that name; None takes every running job (right for the
+    single-machine default, where one worker runs).
+    """
+    conds = [] if worker is None else [Job.worker == worker]
+    return _reap(session, conds, error, requeue_limit)
+
+
+def reap_stale(
+    session: Session,
+    *,
+    older_than_s: float,
+    error: str = "the worker stopped reporting (died or lost its connection); retry the job",
+    requeue_limit: int = 0,
+) -> Reaped:
+    """Requeue or fail running jobs whose worker has not reported for ``older_than_s`` seconds."""
+    cutoff = utcnow() - timedelta(seconds=older_than_s)
+    return _reap(session, [func.coalesce(Job.heartbeat_at, Job.started_at) < cutoff], error, requeue_limit)
+
+
 def fail_orphaned(
     session: Session,
     *,
     worker: str | None = None,
     error: str = "the worker stopped before the job finished",
 ) -> list[str]:
-    """Fail jobs left running by a worker that died; call it when a worker starts.
-
-    ``worker`` limits it to jobs claimed under that name; None fails every running job (right for the
-    single-machine default, where one worker runs). Returns the failed jobs' ids (they can be retried).
-    """
-    conds = [Job.status == JobStatus.RUNNING]
-    if worker is not None:
-        conds.append(Job.worker == worker)
-    stmt = (
-        update(Job)
-        .where(*conds)
-        .values(status=JobStatus.FAILED, finished_at=utcnow(), error=error)
-        .returning(Job.id)
-        .execution_options(synchronize_session=False)
-    )
-    with writing(session):
-        return list(session.scalars(stmt))
+    """Fail jobs left running by a dead worker (:func:`reap_orphaned` without requeues); their ids."""
+    return reap_orphaned(session, worker=worker, error=error).failed
 
 
 def fail_stale(
@@ -309,21 +411,15 @@ def fail_stale(
     older_than_s: float,
     error: str = "the worker stopped reporting (died or lost its connection); retry the job",
 ) -> list[str]:
-    """Fail running jobs whose worker has not reported for ``older_than_s`` seconds (any worker may call it).
+    """Fail running jobs whose worker has not reported for ``older_than_s`` seconds; their ids."""
+    return reap_stale(session, older_than_s=older_than_s, error=error).failed
 
-    Returns the failed jobs' ids (they can be retried)."""
-    from datetime import timedelta
 
-    cutoff = utcnow() - timedelta(seconds=older_than_s)
-    stmt = (
-        update(Job)
-        .where(Job.status == JobStatus.RUNNING, func.coalesce(Job.heartbeat_at, Job.started_at) < cutoff)
-        .values(status=JobStatus.FAILED, finished_at=utcnow(), error=error)
-        .returning(Job.id)
-        .execution_options(synchronize_session=False)
-    )
+def discard_results(session: Session, job_id: str) -> None:
+    """Drop a job's stored metrics and frame stats (a save that failed half-way)."""
     with writing(session):
-        return list(session.scalars(stmt))
+        session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id == job_id))
+        session.execute(sql_delete(FrameStat).where(FrameStat.job_id == job_id))
 
 
 def delete(session: Session, job_id: str) -> None:

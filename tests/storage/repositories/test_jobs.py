@@ -256,3 +256,46 @@ def test_fail_stale_uses_the_heartbeat(session: Session, seq: Sequence) -> None:
     assert got.status == JobStatus.FAILED and "stopped reporting" in (got.error or "")
     assert jobs.get(session, alive.id).status == JobStatus.RUNNING
     assert jobs.fail_stale(session, older_than_s=1.0) == []
+
+
+def test_reap_requeues_up_to_the_limit_then_fails(session: Session, seq: Sequence) -> None:
+    dead, cancelling = (jobs.create(session, sequence_id=seq.id, preset="full") for _ in range(2))
+    assert jobs.claim(session, dead.id, "w1") and jobs.claim(session, cancelling.id, "w1")
+    jobs.update_progress(session, dead.id, progress=0.5, frames_done=5, stage="tracking")
+    metrics.save_run_metrics(session, dead.id, {"fps": 1.0})  # killed while saving
+    jobs.request_cancel(session, cancelling.id)
+    reaped = jobs.reap_orphaned(session, worker="w1", requeue_limit=1)
+    assert reaped.requeued == [dead.id] and reaped.failed == [cancelling.id]  # a cancel is never requeued
+    got = jobs.get(session, dead.id)
+    assert (got.status, got.attempts, got.requeues, got.progress, got.frames_done, got.worker) == (
+        JobStatus.QUEUED, 2, 1, 0.0, 0, None)
+    assert got.stage == jobs.REQUEUED_STAGE and got.heartbeat_at is None and got.started_at is None
+    with pytest.raises(NotFound):
+        metrics.get_run_metrics(session, dead.id)
+    assert jobs.claim(session, dead.id, "w2")
+    assert jobs.reap_stale(session, older_than_s=-1.0, requeue_limit=1).failed == [dead.id]  # budget spent
+    assert jobs.retry(session, dead.id).requeues == 0
+
+
+def test_attempt_guard_keeps_a_reaped_worker_off_the_new_attempt(session: Session, job: Job) -> None:
+    assert jobs.claim(session, job.id, "old")
+    assert jobs.heartbeat(session, job.id, attempt=1)
+    assert jobs.reap_orphaned(session, worker="old", requeue_limit=1).requeued == [job.id]
+    assert jobs.claim(session, job.id, "new")
+    assert not jobs.heartbeat(session, job.id, attempt=1)
+    assert jobs.update_progress(session, job.id, frames_done=99, attempt=1)  # "stop"
+    assert jobs.get(session, job.id).frames_done == 0
+    with pytest.raises(Conflict, match="requeued"):
+        jobs.finish(session, job.id, "succeeded", attempt=1)
+    assert not jobs.update_progress(session, job.id, frames_done=3, attempt=2)
+    assert jobs.finish(session, job.id, "succeeded", attempt=2).status == JobStatus.SUCCEEDED
+    assert not jobs.heartbeat(session, job.id, attempt=2)  # ended: no more heartbeats
+
+
+def test_discard_results(session: Session, job: Job) -> None:
+    metrics.save_run_metrics(session, job.id, {"fps": 1.0})
+    metrics.add_frame_stats(session, job.id, [{"frame_index": 0, "timestamp": 0.0}])
+    jobs.discard_results(session, job.id)
+    with pytest.raises(NotFound):
+        metrics.get_run_metrics(session, job.id)
+    assert metrics.get_frame_stats(session, job.id) == []

@@ -1,0 +1,84 @@
+"""Jobs of dead workers: requeued (up to ``Settings.requeue_orphans`` times) or failed, files removed.
+
+Two ways to find them: on start a worker takes the jobs still running under its own name (its previous
+process died: see :mod:`worker.identity`), and every worker's reaper thread takes running jobs of any
+worker that has not reported for ``heartbeat_timeout_s`` (killed, machine lost). Their partial outputs
+(the staging folder of the run, artifacts of an interrupted save) are removed either way, so a failed
+job shows no half of a result and a requeued one starts clean.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+
+from storage.models import JobStatus
+from storage.repositories import jobs
+from storage.repositories.jobs import Reaped
+from worker.tasks import WorkerContext
+
+log = logging.getLogger("worker.reaping")
+
+
+def reap_orphans(ctx: WorkerContext) -> Reaped:
+    """Jobs this worker name left running when its process died."""
+    with ctx.session_factory() as session:
+        reaped = jobs.reap_orphaned(
+            session,
+            worker=ctx.name,
+            error=f"the worker ({ctx.name}) stopped before the job finished; retry it",
+            requeue_limit=ctx.settings.requeue_orphans,
+        )
+    _settle(ctx, reaped, f"was left running by a previous worker {ctx.name}")
+    return reaped
+
+
+def reap_stale(ctx: WorkerContext, timeout_s: float) -> Reaped:
+    """Jobs of any worker that stopped reporting for ``timeout_s``."""
+    with ctx.session_factory() as session:
+        reaped = jobs.reap_stale(session, older_than_s=timeout_s, requeue_limit=ctx.settings.requeue_orphans)
+    _settle(ctx, reaped, f"had no sign of its worker for {timeout_s:g} s")
+    return reaped
+
+
+def _settle(ctx: WorkerContext, reaped: Reaped, why: str) -> None:
+    for job_id in reaped.all:
+        ctx.store.delete_job(job_id)
+        ctx.store.delete_staging(f"job-{job_id}-")
+    for job_id in reaped.failed:
+        log.warning("job %s %s: marked failed", job_id, why)
+    for job_id in reaped.requeued:  # the row is queued again; now the queue message (order matters)
+        log.warning("job %s %s: requeued", job_id, why)
+        try:
+            if ctx.enqueue is None:
+                raise RuntimeError("this worker has no queue to requeue on")
+            ctx.enqueue(job_id)
+        except Exception as exc:
+            log.error("job %s could not be requeued: %s", job_id, exc)
+            try:
+                with ctx.session_factory() as session:
+                    jobs.finish(session, job_id, JobStatus.FAILED,
+                                error=f"its worker died and requeueing it failed ({exc}); retry it")
+            except Exception as again:  # left queued without a message: a manual retry is needed
+                log.error("job %s: could not mark it failed either: %s", job_id, again)
+
+
+def start_reaper(
+    ctx: WorkerContext, timeout_s: float, alive: Callable[[], None] | None = None
+) -> threading.Thread:
+    """A daemon thread reaping stale jobs every ``timeout_s / 4`` until ``ctx.stopping``; ``alive`` is
+    called after every round that reached the database (the worker's health signal)."""
+
+    def loop() -> None:
+        while not ctx.stopping.wait(timeout_s / 4):
+            try:
+                reap_stale(ctx, timeout_s)
+                if alive is not None:
+                    alive()
+            except Exception:  # a database hiccup must not kill the worker; the next round retries
+                log.exception("checking for stale jobs failed")
+
+    thread = threading.Thread(target=loop, name="stale-job-reaper", daemon=True)
+    thread.start()
+    return thread
