@@ -7,9 +7,11 @@ from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 
 from fastapi import APIRouter, FastAPI
+from fastapi.middleware.cors import CORSMiddleware
 from sqlalchemy.orm import Session, sessionmaker
 
 from backend.api import batches, health, job_files, jobs, presets, sequences
+from backend.api.deps import document_auth
 from backend.api.errors import install_error_handlers
 from backend.api.pages import include_dashboard
 from storage.artifacts import ArtifactStore
@@ -101,4 +103,15 @@ def create_app(
         api.include_router(module.router)
     app.include_router(api)
     include_dashboard(app)  # dashboard pages, /static and the viewer endpoint
+    document_auth(app, required=bool(settings.api_token))
+    if settings.cors_origins:  # off by default: no cross-origin browser access unless configured
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=settings.cors_origins,
+            allow_methods=["GET", "POST", "DELETE"],
+            allow_headers=["Authorization", "Content-Type", "Range", "Last-Event-ID"],
+            allow_credentials=False,  # the api authenticates by bearer token, never by cookie
+            expose_headers=["Content-Disposition", "Content-Range", "Accept-Ranges"],
+            max_age=600,
+        )
     return app

@@ -9,14 +9,15 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Query, status
 from fastapi.responses import Response
 
-from backend.api.deps import Auth, EnqueueDep, SessionDep
+from backend.api.deps import Auth, EnqueueDep, Limit, Offset, SessionDep
 from backend.api.errors import error_responses
+from backend.api.guard import GuardedRoute
 from backend.api.jobs import check_config, enqueue_or_fail
-from backend.api.schemas import BatchCreate, BatchOut, Page, TableRow
+from backend.api.schemas import BatchCreate, BatchId, BatchOut, Page, TableRow
 from storage.presets import check_preset
 from storage.repositories import batches
 
-router = APIRouter(prefix="/batches", tags=["batches"])
+router = APIRouter(prefix="/batches", tags=["batches"], route_class=GuardedRoute)
 
 TABLE_COLUMNS = list(TableRow.model_fields)
 
@@ -26,7 +27,7 @@ TABLE_COLUMNS = list(TableRow.model_fields)
     status_code=status.HTTP_201_CREATED,
     response_model=BatchOut,
     dependencies=[Auth],
-    responses=error_responses(401, 404, 422, 503),
+    responses=error_responses(400, 401, 404, 413, 422, 503),
 )
 def create_batch(body: BatchCreate, session: SessionDep, enqueue: EnqueueDep) -> BatchOut:
     """One job per sequence x preset, all queued."""
@@ -41,8 +42,8 @@ def create_batch(body: BatchCreate, session: SessionDep, enqueue: EnqueueDep) ->
 @router.get("", response_model=Page[BatchOut], responses=error_responses(422))
 def list_batches(
     session: SessionDep,
-    limit: Annotated[int, Query(ge=1, le=1000)] = 50,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    limit: Limit = 50,
+    offset: Offset = 0,
 ) -> Page[BatchOut]:
     items = batches.list_batches(session, limit=limit, offset=offset)
     out = [BatchOut.of(b, batches.jobs_of(session, b.id)) for b in items]
@@ -50,7 +51,7 @@ def list_batches(
 
 
 @router.get("/{batch_id}", response_model=BatchOut, responses=error_responses(404))
-def get_batch(batch_id: str, session: SessionDep) -> BatchOut:
+def get_batch(batch_id: BatchId, session: SessionDep) -> BatchOut:
     return BatchOut.of(batches.get(session, batch_id), batches.jobs_of(session, batch_id))
 
 
@@ -63,7 +64,7 @@ def get_batch(batch_id: str, session: SessionDep) -> BatchOut:
     },
 )
 def get_table(
-    batch_id: str,
+    batch_id: BatchId,
     session: SessionDep,
     format: Annotated[Literal["json", "csv"], Query(description="json (default) or csv")] = "json",
 ) -> list[TableRow] | Response:

@@ -13,9 +13,9 @@ from fastapi.responses import FileResponse, StreamingResponse
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
-from backend.api.deps import SessionDep, StoreDep
+from backend.api.deps import Offset, SessionDep, StoreDep
 from backend.api.errors import error_responses
-from backend.api.schemas import ArtifactOut, FrameOut, JobOut, Page
+from backend.api.schemas import ArtifactName, ArtifactOut, FrameOut, JobId, JobOut, Page
 from storage.errors import NotFound
 from storage.repositories import jobs, metrics
 
@@ -31,6 +31,8 @@ CONTENT_TYPES = {
     ".jpg": "image/jpeg",
     ".jpeg": "image/jpeg",
 }
+_MEDIA_TYPES = sorted({t.split(";")[0] for t in CONTENT_TYPES.values()} | {"application/octet-stream"})
+"""Every media type an artifact may be served as (documented on the download route)."""
 
 
 def content_type(name: str) -> str:
@@ -39,7 +41,7 @@ def content_type(name: str) -> str:
 
 
 @router.get("/{job_id}/artifacts", response_model=list[ArtifactOut], responses=error_responses(404))
-def list_artifacts(job_id: str, session: SessionDep, store: StoreDep) -> list[ArtifactOut]:
+def list_artifacts(job_id: JobId, session: SessionDep, store: StoreDep) -> list[ArtifactOut]:
     """The job's finished outputs (trajectory.txt, keyframes.txt, map.ply, metrics.json, config.json,
     frames.csv, log.txt, preview.png)."""
     jobs.get(session, job_id)
@@ -58,12 +60,12 @@ def list_artifacts(job_id: str, session: SessionDep, store: StoreDep) -> list[Ar
     "/{job_id}/artifacts/{name}",
     response_class=FileResponse,
     responses={
-        200: {"description": "the file", "content": {"application/octet-stream": {}}},
+        200: {"description": "the file", "content": {t: {} for t in _MEDIA_TYPES}},
         206: {"description": "the requested byte range (send `Range: bytes=a-b`)"},
         **error_responses(404, 416, 422),
     },
 )
-def get_artifact(job_id: str, name: str, session: SessionDep, store: StoreDep) -> FileResponse:
+def get_artifact(job_id: JobId, name: ArtifactName, session: SessionDep, store: StoreDep) -> FileResponse:
     """Download one artifact; ``Range`` requests are honoured (large point clouds resume)."""
     jobs.get(session, job_id)
     path = store.path(job_id, name)
@@ -73,10 +75,10 @@ def get_artifact(job_id: str, name: str, session: SessionDep, store: StoreDep) -
 
 @router.get("/{job_id}/frames", response_model=Page[FrameOut], responses=error_responses(404, 422))
 def list_frames(
-    job_id: str,
+    job_id: JobId,
     session: SessionDep,
     limit: Annotated[int, Query(ge=1, le=100_000)] = 10_000,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Offset = 0,
 ) -> Page[FrameOut]:
     """Per-frame statistics of a finished run, in frame order (also downloadable as ``frames.csv``)."""
     jobs.get(session, job_id)
@@ -101,7 +103,7 @@ def _sse(event: str, data: str, event_id: int) -> str:
     },
 )
 async def job_events(
-    job_id: str,
+    job_id: JobId,
     request: Request,
     interval: Annotated[float, Query(ge=0.1, le=10.0, description="Polling interval in seconds.")] = 0.5,
 ) -> StreamingResponse:

@@ -9,16 +9,17 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query, Response, status
 from sqlalchemy.orm import Session
 
-from backend.api.deps import Auth, Enqueue, EnqueueDep, SessionDep, StoreDep
+from backend.api.deps import Auth, Enqueue, EnqueueDep, Limit, Offset, SessionDep, StoreDep
 from backend.api.errors import error_responses
-from backend.api.schemas import JobCreate, JobOut, Page
+from backend.api.guard import GuardedRoute
+from backend.api.schemas import JobCreate, JobId, JobOut, Page
 from storage.errors import InvalidInput, StorageError
 from storage.models import JobStatus
 from storage.presets import check_preset
 from storage.repositories import jobs
 from storage.repositories.metrics import json_safe
 
-router = APIRouter(prefix="/jobs", tags=["jobs"])
+router = APIRouter(prefix="/jobs", tags=["jobs"], route_class=GuardedRoute)
 log = logging.getLogger("backend.api")
 
 MAX_CONFIG_CHARS = 64 * 1024
@@ -57,7 +58,7 @@ def check_config(config: dict[str, Any] | None) -> dict[str, Any] | None:
     status_code=status.HTTP_201_CREATED,
     response_model=JobOut,
     dependencies=[Auth],
-    responses=error_responses(401, 404, 422, 503),
+    responses=error_responses(400, 401, 404, 413, 422, 503),
 )
 def create_job(body: JobCreate, session: SessionDep, enqueue: EnqueueDep) -> JobOut:
     """Queue a run of a sequence under a preset, with optional config overrides."""
@@ -74,8 +75,8 @@ def list_jobs(
     status_: Annotated[JobStatus | None, Query(alias="status")] = None,
     sequence_id: str | None = None,
     batch_id: str | None = None,
-    limit: Annotated[int, Query(ge=1, le=1000)] = 50,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    limit: Limit = 50,
+    offset: Offset = 0,
 ) -> Page[JobOut]:
     """Newest first, optionally filtered by status, sequence or batch."""
     filters = {"status": status_, "sequence_id": sequence_id, "batch_id": batch_id}
@@ -86,14 +87,14 @@ def list_jobs(
 
 
 @router.get("/{job_id}", response_model=JobOut, responses=error_responses(404))
-def get_job(job_id: str, session: SessionDep) -> JobOut:
+def get_job(job_id: JobId, session: SessionDep) -> JobOut:
     return JobOut.of(jobs.get(session, job_id))
 
 
 @router.post(
     "/{job_id}/cancel", response_model=JobOut, dependencies=[Auth], responses=error_responses(401, 404, 409)
 )
-def cancel_job(job_id: str, session: SessionDep) -> JobOut:
+def cancel_job(job_id: JobId, session: SessionDep) -> JobOut:
     """A queued job is cancelled at once; a running one stops within a few frames (watch its status)."""
     return JobOut.of(jobs.request_cancel(session, job_id))
 
@@ -101,7 +102,7 @@ def cancel_job(job_id: str, session: SessionDep) -> JobOut:
 @router.post(
     "/{job_id}/retry", response_model=JobOut, dependencies=[Auth], responses=error_responses(401, 404, 409, 503)
 )
-def retry_job(job_id: str, session: SessionDep, store: StoreDep, enqueue: EnqueueDep) -> JobOut:
+def retry_job(job_id: JobId, session: SessionDep, store: StoreDep, enqueue: EnqueueDep) -> JobOut:
     """Queue a failed or cancelled job again from scratch (its old artifacts and metrics are dropped)."""
     jobs.retry(session, job_id)
     store.delete_job(job_id)
@@ -112,7 +113,7 @@ def retry_job(job_id: str, session: SessionDep, store: StoreDep, enqueue: Enqueu
 @router.delete(
     "/{job_id}", status_code=status.HTTP_204_NO_CONTENT, dependencies=[Auth], responses=error_responses(401, 404)
 )
-def delete_job(job_id: str, session: SessionDep, store: StoreDep) -> Response:
+def delete_job(job_id: JobId, session: SessionDep, store: StoreDep) -> Response:
     """Delete a job in any state with its metrics and artifacts (a running one stops)."""
     jobs.delete(session, job_id)
     store.delete_job(job_id)

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from datetime import UTC, datetime
-from typing import Any, Generic, TypeVar
+from typing import Annotated, Any, Generic, TypeVar
 
+from fastapi import Path
 from pydantic import BaseModel, ConfigDict, Field
 
 from storage.models import Batch, Job, JobStatus, Sequence
@@ -14,6 +15,14 @@ T = TypeVar("T")
 
 _SEQ_ID = "3f2c9a7e0b1d4c5e8f6a7b8c9d0e1f2a"
 _JOB_ID = "9b8a7c6d5e4f43a2b1c0d9e8f7a6b5c4"
+_BATCH_ID = "5d4c3b2a1f0e4d9c8b7a6f5e4d3c2b1a"
+
+# Path parameters with examples: the docs show a real-looking id, and the api's fuzz test seeds these
+# very ids so its generated requests reach existing resources, not only 404s.
+SequenceId = Annotated[str, Path(description="A sequence's id.", examples=[_SEQ_ID])]
+JobId = Annotated[str, Path(description="A job's id.", examples=[_JOB_ID])]
+BatchId = Annotated[str, Path(description="A batch's id.", examples=[_BATCH_ID])]
+ArtifactName = Annotated[str, Path(description="A file the run wrote.", examples=["trajectory.txt"])]
 
 
 class SequenceOut(BaseModel):

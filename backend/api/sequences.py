@@ -6,16 +6,16 @@ from __future__ import annotations
 import mimetypes
 import re
 from pathlib import Path
-from typing import Annotated
 
 import anyio
-from fastapi import APIRouter, Query, Request, Response, status
+from fastapi import APIRouter, Request, Response, status
 from fastapi.responses import FileResponse
 from starlette.concurrency import run_in_threadpool
 
-from backend.api.deps import Auth, SessionDep, SettingsDep, StoreDep
+from backend.api.deps import Auth, Limit, Offset, SessionDep, SettingsDep, StoreDep
 from backend.api.errors import error_responses
-from backend.api.schemas import Page, SequenceImport, SequenceOut
+from backend.api.guard import GuardedRoute
+from backend.api.schemas import Page, SequenceId, SequenceImport, SequenceOut
 from backend.api.upload import receive_upload
 from storage.errors import InvalidInput, NotFound
 from storage.ingest import ingest_staged, register_folder, upload_limits
@@ -24,7 +24,7 @@ from storage.ingest.stream import ArchiveSink
 from storage.presets import CAMERA_PRESETS, parse_camera_spec
 from storage.repositories import sequences
 
-router = APIRouter(prefix="/sequences", tags=["sequences"])
+router = APIRouter(prefix="/sequences", tags=["sequences"], route_class=GuardedRoute)
 
 _UPLOAD_BODY = {
     "requestBody": {
@@ -104,7 +104,7 @@ async def upload_sequence(
     status_code=status.HTTP_201_CREATED,
     response_model=SequenceOut,
     dependencies=[Auth],
-    responses=error_responses(401, 404, 422),
+    responses=error_responses(400, 401, 404, 413, 422),
     summary="Register a folder already on the server",
 )
 def import_sequence(
@@ -118,8 +118,8 @@ def import_sequence(
 @router.get("", response_model=Page[SequenceOut], responses=error_responses(422))
 def list_sequences(
     session: SessionDep,
-    limit: Annotated[int, Query(ge=1, le=1000)] = 50,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    limit: Limit = 50,
+    offset: Offset = 0,
 ) -> Page[SequenceOut]:
     """Newest first."""
     items = sequences.list_sequences(session, limit=limit, offset=offset)
@@ -129,7 +129,7 @@ def list_sequences(
 
 
 @router.get("/{sequence_id}", response_model=SequenceOut, responses=error_responses(404))
-def get_sequence(sequence_id: str, session: SessionDep) -> SequenceOut:
+def get_sequence(sequence_id: SequenceId, session: SessionDep) -> SequenceOut:
     return SequenceOut.of(sequences.get(session, sequence_id))
 
 
@@ -138,7 +138,7 @@ def get_sequence(sequence_id: str, session: SessionDep) -> SequenceOut:
     response_class=FileResponse,
     responses={200: {"content": {"image/png": {}, "image/jpeg": {}}}, **error_responses(404)},
 )
-def get_thumbnail(sequence_id: str, session: SessionDep, store: StoreDep) -> FileResponse:
+def get_thumbnail(sequence_id: SequenceId, session: SessionDep, store: StoreDep) -> FileResponse:
     """The first frame's colour image, as stored."""
     seq = sequences.get(session, sequence_id)
     rel = seq.meta.get("thumbnail")
@@ -156,7 +156,7 @@ def get_thumbnail(sequence_id: str, session: SessionDep, store: StoreDep) -> Fil
     dependencies=[Auth],
     responses=error_responses(401, 404),
 )
-def delete_sequence(sequence_id: str, session: SessionDep, store: StoreDep) -> Response:
+def delete_sequence(sequence_id: SequenceId, session: SessionDep, store: StoreDep) -> Response:
     """Delete the sequence, its jobs (running ones stop) and their artifacts.
 
     A folder registered in place is left untouched on the server; only uploaded files are removed.

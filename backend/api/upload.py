@@ -65,7 +65,10 @@ class _Receiver:
 
     def on_header_end(self) -> None:
         key = self._header_field.decode("latin-1").lower()
-        self._headers[key] = self._header_value.decode("utf-8", "replace")
+        # latin-1 keeps the raw bytes (what parse_options_header expects: it re-encodes to latin-1 and
+        # failed with a 500 on any other character); names and filenames are decoded as UTF-8 below,
+        # which is what browsers send for a non-ASCII file name.
+        self._headers[key] = self._header_value.decode("latin-1")
         self._header_field.clear()
         self._header_value.clear()
 
@@ -105,9 +108,11 @@ async def receive_upload(request: Request, sink: Sink, *, file_field: str, max_b
     """Parse the multipart body of ``request``, handing the ``file_field`` part's bytes to ``sink``."""
     ctype, options = parse_options_header(request.headers.get("content-type", ""))
     if ctype != b"multipart/form-data" or b"boundary" not in options:
-        raise InvalidInput("the upload must be multipart/form-data", {"content_type": ctype.decode()})
+        raise InvalidInput("the upload must be multipart/form-data", {"content_type": ctype.decode("latin-1")})
     length = request.headers.get("content-length")
-    if length is not None and length.isdigit() and int(length) > max_bytes + MAX_FIELDS * MAX_FIELD_BYTES:
+    # isascii: str.isdigit() accepts "²" (a latin-1 header byte) that int() then refuses
+    declared = int(length) if length and length.isascii() and length.isdigit() else None
+    if declared is not None and declared > max_bytes + MAX_FIELDS * MAX_FIELD_BYTES:
         raise PayloadTooLarge(f"the upload is larger than {max_bytes} bytes", {"max_bytes": max_bytes})
     rx = _Receiver(file_field, max_bytes)
     callbacks = {

@@ -18,6 +18,7 @@ from starlette.concurrency import run_in_threadpool
 
 from backend.api.deps import SessionDep, SettingsDep
 from backend.api.errors import error_responses
+from backend.api.schemas import JobId
 from storage.errors import StorageError
 from storage.repositories import jobs
 from storage.settings import Settings
@@ -102,7 +103,7 @@ def browser_host(request: Request) -> str:
 
 
 @router.get("/{job_id}/viewer", response_model=ViewerOut, responses=error_responses(404, 409, 503))
-async def job_viewer(job_id: str, request: Request, session: SessionDep, settings: SettingsDep) -> ViewerOut:
+async def job_viewer(job_id: JobId, request: Request, session: SessionDep, settings: SettingsDep) -> ViewerOut:
     """The URL of the run's 3D scene (map, trajectory vs ground truth, keyframes, frame slider)."""
     await run_in_threadpool(jobs.get, session, job_id)  # 404 for an unknown job
     port = await run_in_threadpool(ask_hub, hub_address(settings), job_id)

@@ -88,11 +88,19 @@ def register_folder(
     if settings.import_root is None:
         raise InvalidInput("registering server folders is disabled (VTD_IMPORT_ROOT is not set)")
     root = settings.import_root.resolve()
+    if "\x00" in folder:  # the OS would refuse it with a ValueError (a 500), not an OSError
+        raise InvalidInput("the folder path contains a NUL byte", {"path": folder})
     path = Path(folder)
-    target = (path if path.is_absolute() else root / path).resolve()
-    if not target.is_relative_to(root):
-        raise InvalidInput("the folder must be inside the import root", {"path": folder})
-    if not target.is_dir():
+    try:
+        # resolve() follows symlinks, so a link inside the root that points outside is refused too
+        target = (path if path.is_absolute() else root / path).resolve()
+        if not target.is_relative_to(root):
+            raise InvalidInput("the folder must be inside the import root", {"path": folder})
+        is_dir = target.is_dir()
+    except (OSError, RuntimeError) as exc:  # a name too long, a symlink loop (RuntimeError before 3.13), …
+        reason = getattr(exc, "strerror", None) or "symlink loop"
+        raise InvalidInput(f"unusable folder path: {reason}", {"path": folder}) from None
+    if not is_dir:
         raise NotFound(f"no folder {folder!r} under the import root", {"path": folder})
     info = validate_sequence(target, camera)
     return _record(

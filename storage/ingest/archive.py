@@ -8,6 +8,7 @@ header that lies about sizes cannot get past ``max_bytes`` or the compression-ra
 
 from __future__ import annotations
 
+import errno
 import gzip
 import os
 import shutil
@@ -233,11 +234,29 @@ def _unpack_tar(raw: IO[bytes], dest: Path, budget: _Budget) -> None:
         raise InvalidInput(f"not a readable .tar.gz archive: {exc}") from None
 
 
+_NAME_ERRNOS = {errno.ENAMETOOLONG, errno.EILSEQ, errno.EINVAL}
+"""What a filesystem answers to a name it refuses; anything else (a full disk, …) stays a server error."""
+
+
+def _unusable(rel: PurePosixPath, exc: OSError) -> BaseException:
+    """A name this filesystem refuses (a component over 255 bytes, …) is the archive's fault, not ours."""
+    if exc.errno not in _NAME_ERRNOS:
+        return exc
+    return InvalidInput(
+        f"an archive entry's name cannot be stored: {exc.strerror or exc}", {"entry": str(rel)[:200]}
+    )
+
+
 def _mkdir(dest: Path, rel: PurePosixPath) -> None:
     target = dest.joinpath(*rel.parts)
-    if target.exists() and not target.is_dir():
-        raise InvalidInput("an archive entry is both a file and a folder", {"entry": str(rel)})
-    target.mkdir(parents=True, exist_ok=True)
+    try:
+        if target.exists() and not target.is_dir():
+            raise InvalidInput("an archive entry is both a file and a folder", {"entry": str(rel)})
+        target.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):  # the folder, or one of its parents, is a file
+        raise InvalidInput("an archive entry is both a file and a folder", {"entry": str(rel)}) from None
+    except OSError as exc:
+        raise _unusable(rel, exc) from None
 
 
 def _write(dest: Path, rel: PurePosixPath, src: IO[bytes], budget: _Budget) -> None:
@@ -249,8 +268,10 @@ def _write(dest: Path, rel: PurePosixPath, src: IO[bytes], budget: _Budget) -> N
         fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644)
     except FileExistsError:
         raise InvalidInput("the archive has a duplicate entry", {"entry": str(rel)}) from None
-    except IsADirectoryError:
+    except (IsADirectoryError, NotADirectoryError):
         raise InvalidInput("an archive entry is both a file and a folder", {"entry": str(rel)}) from None
+    except OSError as exc:
+        raise _unusable(rel, exc) from None
     with os.fdopen(fd, "wb") as out:
         while chunk := src.read(CHUNK):
             budget.add(len(chunk))

@@ -83,6 +83,8 @@ def read_list(folder: Path, name: str) -> list[tuple[float, str]]:
     """A TUM list file, time-sorted; every listed path must be a regular file inside ``folder``."""
     path = folder / name
     entries: list[tuple[float, str]] = []
+    real_folder = folder.resolve()
+    inside: dict[PurePosixPath, bool] = {}  # per listed sub-folder: does it stay inside (no symlink out)?
     for lineno, line in enumerate(_read_text(folder, path).splitlines(), 1):
         s = line.strip()
         if not s or s.startswith("#"):
@@ -97,12 +99,19 @@ def read_list(folder: Path, name: str) -> list[tuple[float, str]]:
         if not math.isfinite(t):
             raise _err(folder, path, "timestamp is not finite", lineno)
         rel = PurePosixPath(parts[1])
-        if rel.is_absolute() or ".." in rel.parts or "\\" in parts[1]:
-            raise _err(folder, path, f"path {parts[1]!r} must be relative and stay inside the sequence", lineno)
+        if rel.is_absolute() or ".." in rel.parts or "\\" in parts[1] or "\x00" in parts[1]:
+            raise _err(folder, path, f"path {parts[1][:80]!r} must be relative and stay inside the sequence", lineno)
         try:
+            if rel.parent not in inside:  # a symlinked sub-folder of a registered folder may point anywhere
+                inside[rel.parent] = folder.joinpath(*rel.parent.parts).resolve().is_relative_to(real_folder)
             st = os.lstat(folder.joinpath(*rel.parts))
         except (FileNotFoundError, NotADirectoryError):
-            raise _err(folder, path, f"listed file {parts[1]!r} is missing", lineno) from None
+            raise _err(folder, path, f"listed file {parts[1][:80]!r} is missing", lineno) from None
+        except (OSError, RuntimeError) as exc:  # name too long, symlink loop (RuntimeError before 3.13), …
+            reason = getattr(exc, "strerror", None) or "symlink loop"
+            raise _err(folder, path, f"listed file {parts[1][:80]!r} is unusable ({reason})", lineno) from None
+        if not inside[rel.parent]:
+            raise _err(folder, path, f"listed file {parts[1][:80]!r} lies outside the sequence folder", lineno)
         if not stat.S_ISREG(st.st_mode):
             raise _err(folder, path, f"listed file {parts[1]!r} is not a regular file", lineno)
         entries.append((t, rel.as_posix()))
