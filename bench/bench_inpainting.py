@@ -9,6 +9,7 @@ restoration from tracking errors. Prints RGB PSNR and depth error inside the hol
 from __future__ import annotations
 
 import argparse
+import itertools
 import time
 from pathlib import Path
 
@@ -17,12 +18,12 @@ import numpy as np
 
 from worker.slam.camera import parse_camera
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
-from worker.slam.inpainting.restore import ReferenceView, restore_frame
+from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, restore_frame
 from worker.slam.io.sequence import Sequence
 from worker.slam.truth import load_truth, restoration_psnr
 
 
-def bench_sequence(root: Path, camera: str, n_frames: int, offline: bool) -> dict:
+def bench_sequence(root: Path, camera: str, n_frames: int, offline: bool, config: RestorationConfig) -> dict:
     seq = Sequence(root, parse_camera(camera))
     truth = load_truth(root)
     if truth is None:
@@ -51,7 +52,7 @@ def bench_sequence(root: Path, camera: str, n_frames: int, offline: bool) -> dic
         sel = select_references(Candidate(i, pose[i], desc), cands, sel_cfg)
         refs = [ReferenceView(frame(j)[0].rgb, frame(j)[0].depth, pose[j], frame(j)[1]) for j in sel.indices]
         t0 = time.perf_counter()
-        out = restore_frame(f.rgb, f.depth, hole, pose[i], refs, seq.camera.K)
+        out = restore_frame(f.rgb, f.depth, hole, pose[i], refs, seq.camera.K, config)
         rows["ms"].append((time.perf_counter() - t0) * 1000)
         bg_rgb, bg_depth = truth.background_rgb(i), truth.background_depth(i)
         telea = cv2.inpaint(f.rgb, hole.astype(np.uint8), 3, cv2.INPAINT_TELEA)
@@ -74,7 +75,7 @@ def bench_sequence(root: Path, camera: str, n_frames: int, offline: bool) -> dic
     return {k: float(np.nanmean(v)) for k, v in rows.items()} | {"frames": len(picks)}
 
 
-def bench_speed(root: Path, camera: str, index: int = 60) -> None:
+def bench_speed(root: Path, camera: str, config: RestorationConfig, index: int = 60) -> None:
     """Time per frame against hole size: a person-like ellipse at the image centre of one frame, restored with
     three past references (geometry covers what they see) and with none (PatchMatch from the frame itself, the
     worst case). CPU time of the process (numba runs on one thread), so the figures hold on a loaded machine
@@ -86,7 +87,7 @@ def bench_speed(root: Path, camera: str, index: int = 60) -> None:
     h, w = f.depth.shape
     refs = [ReferenceView(seq[j].rgb, seq[j].depth, pose[j], truth.mask(j))
             for j in (index - 15, index - 10, index - 5)]
-    print(f"\n| {root.name} frame {index} | hole % | refs | seen by refs % | CPU ms/frame | PSNR (dB) |")
+    print(f"\n| {root.name} frame {index}, unseen: {config.unseen_fill} | hole % | refs | seen by refs % | CPU ms/frame | PSNR (dB) |")
     print("|---|---|---|---|---|---|")
     for frac in (0.05, 0.10, 0.15, 0.25):
         a = np.sqrt(frac * h * w / np.pi / 2.5)
@@ -96,7 +97,7 @@ def bench_speed(root: Path, camera: str, index: int = 60) -> None:
             ts = []
             for _ in range(3):
                 t0 = time.process_time()
-                out = restore_frame(f.rgb, f.depth, hole, pose[index], rr, seq.camera.K)
+                out = restore_frame(f.rgb, f.depth, hole, pose[index], rr, seq.camera.K, config)
                 ts.append(time.process_time() - t0)
             print(f"| | {100 * hole.mean():.1f} | {len(rr)} | "
                   f"{100 * out.seen_by_reference.sum() / hole.sum():.0f} | {1000 * np.median(ts):.0f} | "
@@ -109,20 +110,24 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--camera", default="tum3", help="preset when the sequence has no camera.json")
     ap.add_argument("--speed", action="store_true", help="also time restoration against hole size")
+    ap.add_argument("--unseen-fill", default="patchmatch,telea",
+                    help="fills to compare for pixels no reference sees (comma-separated)")
     args = ap.parse_args()
     print("| sequence | mode | frames | hole % | refs | hole seen by refs % | PSNR all (dB) | PSNR seen | "
           "PSNR unseen | Telea PSNR | depth median err (cm) | depth err seen (cm) | depth restored % | ms/frame |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for root in args.sequences:
-        for offline in (False, True):
-            r = bench_sequence(root, args.camera, args.frames, offline)
-            print(f"| {root.name} | {'offline' if offline else 'online'} | {r['frames']} | {100 * r['hole']:.1f} | "
-                  f"{r['refs']:.1f} | {100 * r['seen']:.0f} | {r['pm_psnr']:.2f} | {r['seen_psnr']:.2f} | "
-                  f"{r['unseen_psnr']:.2f} | {r['telea_psnr']:.2f} | {100 * r['pm_depth_med']:.2f} | "
-                  f"{100 * r['depth_seen']:.2f} | {100 * r['depth_valid']:.0f} | {r['ms']:.0f} |", flush=True)
+    fills = args.unseen_fill.split(",")
+    for root, offline, fill in itertools.product(args.sequences, (False, True), fills):
+        r = bench_sequence(root, args.camera, args.frames, offline, RestorationConfig(unseen_fill=fill))
+        print(f"| {root.name} | {'offline' if offline else 'online'}, unseen: {fill} | {r['frames']} | "
+              f"{100 * r['hole']:.1f} | "
+              f"{r['refs']:.1f} | {100 * r['seen']:.0f} | {r['pm_psnr']:.2f} | {r['seen_psnr']:.2f} | "
+              f"{r['unseen_psnr']:.2f} | {r['telea_psnr']:.2f} | {100 * r['pm_depth_med']:.2f} | "
+              f"{100 * r['depth_seen']:.2f} | {100 * r['depth_valid']:.0f} | {r['ms']:.0f} |", flush=True)
     if args.speed:
         for root in args.sequences:
-            bench_speed(root, args.camera)
+            for fill in fills:
+                bench_speed(root, args.camera, RestorationConfig(unseen_fill=fill))
 
 
 if __name__ == "__main__":

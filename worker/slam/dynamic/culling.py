@@ -16,7 +16,7 @@ import numpy as np
 
 from worker.slam.dynamic.epipolar import (Matches, epipolar_distance, fundamental_ransac, match_guided,
                                           match_orb, predict_positions)
-from worker.slam.dynamic.segments import split_segments
+from worker.slam.dynamic.segments import grow_by_depth, split_segments
 from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy
 from worker.slam.features.search import KeypointIndex
 
@@ -69,6 +69,11 @@ class CullingConfig:
     cluster_min_points: int = 4
     cluster_depth_tol: float = 0.25
     """Pixels within this (relative) depth of a cluster's median depth belong to the moving region."""
+    grow_px: int = 0
+    """A dynamic segment is extended by up to this many pixels along its own surface (depth), to cover what
+    segmentation missed (0 = off); see `segments.grow_by_depth`."""
+    grow_rel_depth: float = 0.15
+    """Relative depth tolerance of that growth around the segment's median depth."""
     dilation_px: int = 3
     """The exclude mask is the dynamic mask dilated by this many pixels (keypoints sit on object borders)."""
 
@@ -206,7 +211,8 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
             moving = float(np.quantile(s, config.segment_quantile)) > thr
         decisions.append(SegmentDecision(lab, "semantic", len(s), float(np.median(s)) if len(s) else 0.0, moving))
         if moving:
-            dynamic |= labels == lab
+            dynamic |= grow_by_depth(labels == lab, depth_cur, config.grow_px, config.grow_rel_depth,
+                                     config.depth_jump)
     if config.detect_unknown or not use_sem:
         moving_pts = scores > thr
         for k, region in enumerate(_geometric_clusters(p_cur, moving_pts, depth_cur, point_label > 0,

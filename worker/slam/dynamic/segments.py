@@ -59,3 +59,36 @@ def _split(m: np.ndarray, depth: np.ndarray, min_area: int, rel_jump: float) -> 
         fill = m & (grown == 0) & (dil > 0)
         grown[fill] = dil[fill]
     return grown
+
+
+def grow_by_depth(region: np.ndarray, depth: np.ndarray, grow_px: int, rel_tol: float = 0.15,
+                  rel_jump: float = 0.05) -> np.ndarray:
+    """bool (H, W): `region` (one object) extended into the pixels that continue its surface: within `grow_px`
+    of it, reachable without crossing a depth edge, and within `rel_tol` of its median depth (metres, `depth`).
+
+    Segmentation under-covers people (limbs, hair, the last frames of a fast mover); their pixels are
+    bounded by depth discontinuities, so the surface can be completed from depth alone. `grow_px` bounds
+    the leak where a person touches something at the same depth (feet on the floor)."""
+    ys, xs = np.nonzero(region)
+    if grow_px <= 0 or len(ys) == 0:
+        return region
+    h, w = region.shape
+    y0, y1 = max(ys.min() - grow_px, 0), min(ys.max() + grow_px + 1, h)
+    x0, x1 = max(xs.min() - grow_px, 0), min(xs.max() + grow_px + 1, w)
+    r, d = region[y0:y1, x0:x1], depth[y0:y1, x0:x1]
+    z = d[r & (d > 0)]
+    if len(z) == 0:
+        return region
+    zmed = float(np.median(z))
+    k = 2 * grow_px + 1
+    near = cv2.dilate(r.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
+    on_surface = near & (np.abs(d - zmed) < rel_tol * zmed)
+    union = r | (on_surface & ~depth_edges(d, rel_jump))
+    _, lab = cv2.connectedComponents(union.astype(np.uint8), connectivity=4)
+    touched = np.unique(lab[r])
+    grown = np.isin(lab, touched[touched > 0])
+    # the object's own outline is a depth edge too: give back the edge pixels at its depth
+    grown |= on_surface & (cv2.dilate(grown.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
+    out = region.copy()
+    out[y0:y1, x0:x1] |= grown
+    return out

@@ -131,3 +131,17 @@ def test_predicted_positions_follow_depth_and_rotation():
     h = H @ np.array([uv[2, 0], uv[2, 1], 1.0])
     got = predict_positions(uv, z, T, K)
     assert np.allclose(got[:2], expected) and np.allclose(got[2], h[:2] / h[2])
+
+
+def test_growth_completes_an_object_along_its_surface_and_stops_at_depth_edges():
+    from worker.slam.dynamic.segments import grow_by_depth
+    depth = np.full((240, 320), 3.0, np.float32)
+    depth[60:200, 100:160] = 1.5  # a person-sized object in front of a wall
+    obj = depth < 2
+    seen = np.zeros_like(obj)
+    seen[60:120, 100:160] = True  # segmentation found only its upper half
+    grown = grow_by_depth(seen, depth, grow_px=100)
+    assert np.array_equal(grown, obj)  # the whole object, nothing of the wall behind it
+    short = grow_by_depth(seen, depth, grow_px=10)
+    assert short[:130].sum() == obj[:130].sum() and not short[135:].any()  # bounded by grow_px
+    assert np.array_equal(grow_by_depth(seen, depth, grow_px=0), seen)

@@ -5,7 +5,7 @@ import pytest
 from tests.worker.slam.inpainting.scene import K, H, W, pose, render, texture
 from worker.slam.inpainting.patchmatch import patchmatch_fill
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
-from worker.slam.inpainting.restore import ReferenceView, restore_frame
+from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, restore_frame
 from worker.slam.inpainting.warp import depth_in_target, forward_warp, relative_pose
 
 
@@ -81,6 +81,33 @@ def test_no_references_falls_back_to_target_itself():
     out = restore_frame(rgb, depth, hole, pose(0.0), [], K)
     assert out.from_self == 1.0 and out.from_geometry == 0.0
     assert np.all(out.depth[hole] == 0)  # no reference: depth stays invalid rather than guessed
+
+
+def test_unseen_pixels_by_diffusion_keep_geometry_and_invent_no_corners():
+    tex = texture(2)
+    rgb, depth = render(pose(0.0), tex)
+    r_rgb, r_depth = render(pose(0.05), tex)
+    hole = person_hole()
+    # the reference saw only the left half of what the hole hides
+    r_dyn = np.zeros((H, W), bool)
+    r_dyn[:, W // 2 - 15:] = True
+    ref = ReferenceView(r_rgb, r_depth, pose(0.05), r_dyn)
+    telea = restore_frame(rgb, depth, hole, pose(0.0), [ref], K, RestorationConfig(unseen_fill="telea"))
+    pm = restore_frame(rgb, depth, hole, pose(0.0), [ref], K, RestorationConfig(unseen_fill="patchmatch"))
+    seen = telea.seen_by_reference
+    assert 0.2 < seen.sum() / hole.sum() < 0.8
+    assert np.array_equal(telea.rgb[seen], pm.rgb[seen])  # geometry decides where a reference sees
+    unseen = hole & ~seen
+    assert np.all(telea.depth[unseen] == 0) and np.all(telea.depth_confidence[unseen] == 0)
+    inner = cv2.erode(unseen.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
+
+    def corners_inside(img):
+        kps = cv2.ORB_create(3000, fastThreshold=10).detect(cv2.cvtColor(img, cv2.COLOR_RGB2GRAY), None)
+        return sum(inner[int(k.pt[1]), int(k.pt[0])] for k in kps)
+    # a smooth fill invents (almost) no corners where copied texture does
+    assert corners_inside(telea.rgb) < 0.3 * corners_inside(pm.rgb)
+    with pytest.raises(ValueError, match="unseen_fill"):
+        restore_frame(rgb, depth, hole, pose(0.0), [], K, RestorationConfig(unseen_fill="magic"))
 
 
 def test_reference_selection_prefers_informative_moved_frames():
