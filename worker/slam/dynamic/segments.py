@@ -69,8 +69,10 @@ def grow_by_depth(region: np.ndarray, depth: np.ndarray, grow_px: int, rel_tol: 
     Segmentation under-covers people (limbs, hair, the last frames of a fast mover); their pixels are
     bounded by depth discontinuities, so the surface can be completed from depth alone. `grow_px` bounds
     the leak where a person touches something at the same depth (feet on the floor)."""
+    if grow_px <= 0:
+        return region
     ys, xs = np.nonzero(region)
-    if grow_px <= 0 or len(ys) == 0:
+    if len(ys) == 0:
         return region
     h, w = region.shape
     y0, y1 = max(ys.min() - grow_px, 0), min(ys.max() + grow_px + 1, h)
