@@ -250,7 +250,10 @@ def _apply(obj: Any, values: dict, where: str) -> Any:
         else:
             changes[key] = _coerce(cur, val, f"{where}.{key}")
     if getattr(type(obj), "__dataclass_params__").frozen:
-        return dataclasses.replace(obj, **changes)
+        try:
+            return dataclasses.replace(obj, **changes)  # runs the section's own checks (__post_init__)
+        except ValueError as exc:
+            raise ConfigError(f"invalid value in {where}: {exc}", detail={"field": where}) from exc
     for key, val in changes.items():
         setattr(obj, key, val)
     return obj

@@ -31,6 +31,10 @@ class RestorationConfig:
     background (online, 15 frames each): telea 23.3 dB / 62 ms on synthetic and 17.3 dB / 74 ms on
     augmented-real, patchmatch 19.5 dB / 261 ms and 11.2 dB / 327 ms (copied look-alike texture scores worse
     than a smooth guess and costs a full-image search). Geometry-seen pixels are the same either way."""
+
+    def __post_init__(self) -> None:
+        if self.unseen_fill not in ("patchmatch", "telea"):
+            raise ValueError(f"unseen_fill must be 'patchmatch' or 'telea', not {self.unseen_fill!r}")
     max_depth_cost: float = 0.002
     """Matches whose patch cost (mean squared colour error, colours in [0, 1]) exceeds this give no depth."""
     searched_depth: bool = False
@@ -73,8 +77,6 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
                   refs: list[ReferenceView], K: np.ndarray,
                   config: RestorationConfig = RestorationConfig()) -> Restoration:
     """Fill `hole` (H, W) bool in `rgb` (H, W, 3) uint8 and `depth` (H, W) float32 of a frame at pose T_WC."""
-    if config.unseen_fill not in ("patchmatch", "telea"):
-        raise ValueError(f"unseen_fill must be 'patchmatch' or 'telea', not {config.unseen_fill!r}")
     h, w = hole.shape
     if not hole.any():
         return Restoration(rgb.copy(), depth.copy(), np.zeros((h, w), np.float32), hole, hole.copy(), 0.0, 0.0)

@@ -142,3 +142,11 @@ def test_restoration_on_real_7scenes_beats_telea(redkitchen):
     ok = hole & (out.depth > 0) & (f.depth > 0)
     assert ok.sum() > 0.8 * (hole & (f.depth > 0)).sum()
     assert np.median(np.abs(out.depth[ok] - f.depth[ok])) < 0.02
+
+
+def test_a_bad_unseen_fill_is_a_config_error():
+    from worker.slam.config import ConfigError, get_preset
+    with pytest.raises(ConfigError, match="unseen_fill"):
+        get_preset("full", {"restoration.restoration.unseen_fill": "magic"})
+    assert get_preset("full", {"restoration.restoration.unseen_fill": "patchmatch"}) \
+        .section("restoration").restoration.unseen_fill == "patchmatch"
