@@ -220,8 +220,7 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
         if use_sem else np.zeros((h, w), np.int32)
     # Keypoints on objects are matched exhaustively (a search radius would keep only their small motions and
     # bias the decision towards "static"); the static rest, when a pose is predicted, by the guided search.
-    on_object = labels[_pixel(kp_cur[:, 1], h), _pixel(kp_cur[:, 0], w)] > 0 if use_sem \
-        else np.ones(len(kp_cur), bool)
+    on_object = labels[_pixel(kp_cur[:, 1], h), _pixel(kp_cur[:, 0], w)] > 0 if use_sem else None
     m = _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur_prev, config)
     p_prev, p_cur = kp_prev[m.prev_idx].astype(np.float64), kp_cur[m.cur_idx].astype(np.float64)
     xi, yi = _pixel(p_cur[:, 0], w), _pixel(p_cur[:, 1], h)
@@ -276,23 +275,32 @@ def _near_box(pred: np.ndarray, pts: np.ndarray, margin: float) -> np.ndarray:
 
 
 def _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur_prev, config) -> _FrameMatches:
-    """Brute force for the current keypoints `on_object` (M,) bool, guided for the others when a relative pose
-    is predicted and enough guided matches are found; brute force for everything otherwise."""
-    static = np.flatnonzero(~on_object)
-    if T_cur_prev is not None and K is not None and prev_depth is not None and len(kp_prev) and len(static):
+    """Guided matching when a relative pose is predicted and enough guided matches are found, else brute force.
+
+    With segments (`on_object` (M,) bool), the current keypoints on objects are brute-forced against the
+    previous keypoints predicted near them and the rest are guided. Without (`on_object` None, geometry-only)
+    everything is guided first, then what is left on both sides is brute-forced: the moving points a search
+    radius misses are exactly what the geometric path looks for."""
+    guided = np.flatnonzero(~on_object) if on_object is not None else np.arange(len(kp_cur))
+    if T_cur_prev is not None and K is not None and prev_depth is not None and len(kp_prev) and len(guided):
         h, w = prev_depth.shape
         z = prev_depth[_pixel(kp_prev[:, 1], h), _pixel(kp_prev[:, 0], w)]
         g = match_guided(kp_prev.astype(np.float64), z, desc_prev,
-                         KeypointIndex.of_points(kp_cur[static], desc_cur[static]), T_cur_prev, K,
+                         KeypointIndex.of_points(kp_cur[guided], desc_cur[guided]), T_cur_prev, K,
                          config.guided_radius_px, config.match_max_distance)
         if len(g.prev_idx) >= config.guided_min_matches:
-            obj = np.flatnonzero(on_object)
-            near = _near_box(predict_positions(kp_prev.astype(np.float64), z, T_cur_prev, K), kp_cur[obj],
-                             config.object_margin_px)
-            b = match_orb(desc_prev[near], desc_cur[obj], config.match_max_distance)
-            b_prev = near[b.prev_idx]
+            g_cur = guided[g.cur_idx]
+            if on_object is not None:
+                rest_cur = np.flatnonzero(on_object)
+                rest_prev = _near_box(predict_positions(kp_prev.astype(np.float64), z, T_cur_prev, K),
+                                      kp_cur[rest_cur], config.object_margin_px)
+            else:
+                rest_cur = np.setdiff1d(np.arange(len(kp_cur)), g_cur)
+                rest_prev = np.setdiff1d(np.arange(len(kp_prev)), g.prev_idx)
+            b = match_orb(desc_prev[rest_prev], desc_cur[rest_cur], config.match_max_distance)
+            b_prev = rest_prev[b.prev_idx]
             free = ~np.isin(b_prev, g.prev_idx)  # a previous keypoint matched twice keeps its guided match
             return _FrameMatches(np.concatenate([g.prev_idx, b_prev[free]]),
-                                 np.concatenate([static[g.cur_idx], obj[b.cur_idx[free]]]), True)
+                                 np.concatenate([g_cur, rest_cur[b.cur_idx[free]]]), True)
     m = match_orb(desc_prev, desc_cur, config.match_max_distance)
     return _FrameMatches(m.prev_idx, m.cur_idx, False)

@@ -67,8 +67,10 @@ def test_still_object_of_dynamic_class_keeps_features():
     assert res.removed(kp).sum() == 0
 
 
-def test_geometry_only_finds_moving_object_without_segmentation():
-    res, kp, truth = run(0.06, mask=False, use_segmentation=False)
+@pytest.mark.parametrize("predicted", [False, True])
+def test_geometry_only_finds_moving_object_without_segmentation(predicted):
+    res, kp, truth = run(0.06, mask=False, predicted=predicted, use_segmentation=False)
+    assert res.guided == predicted
     p, r = precision_recall(res.removed(kp), kp, truth)
     assert p >= 0.8 and r >= 0.8
 
