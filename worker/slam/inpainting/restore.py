@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from worker.slam.inpainting.patchmatch import PatchMatchConfig, patchmatch_fill
-from worker.slam.inpainting.warp import depth_in_target, forward_warp, relative_pose
+from worker.slam.inpainting.warp import depth_in_target, forward_warp, relative_pose, sample_reference
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,9 @@ class RestorationConfig:
             raise ValueError(f"unseen_fill must be 'patchmatch' or 'telea', not {self.unseen_fill!r}")
     max_depth_cost: float = 0.002
     """Matches whose patch cost (mean squared colour error, colours in [0, 1]) exceeds this give no depth."""
+    subpixel: bool = True
+    """Geometry-seen pixels take the reference colour at the exact sub-pixel point (bilinear) instead of the
+    nearest reference pixel the splat found."""
     searched_depth: bool = False
     """Give depth to pixels PatchMatch found by appearance alone (no geometric support). Off: on synthetic truth
     their depth is off by ~10 cm median (look-alike textures elsewhere), so they stay invalid."""
@@ -104,6 +107,12 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
     geo = init_src >= 0
     if config.geometry_first and geo.any():
         out_rgb[py[geo], px[geo]] = np.stack(sources)[init_src[geo], init_yx[geo, 0], init_yx[geo, 1]]
+        if config.subpixel:
+            for s, ref in enumerate(refs):
+                sel = np.flatnonzero(geo & (init_src == s))
+                z = depth_in_target(ref.depth, init_yx[sel], rel[s], K)
+                col, ok = sample_reference(ref.rgb, ~ref.dynamic, np.stack([py[sel], px[sel]], 1), z, rel[s], K)
+                out_rgb[py[sel[ok]], px[sel[ok]]] = col[ok]
     search = ~geo if config.geometry_first else np.ones(len(py), bool)
     if search.any() and config.unseen_fill == "telea":
         fill = np.zeros((h, w), np.uint8)

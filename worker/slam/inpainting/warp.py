@@ -1,6 +1,7 @@
 """Geometry: where reference pixels land in the target camera (the natural PatchMatch initialiser)."""
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from numba import njit
 
@@ -55,3 +56,31 @@ def depth_in_target(ref_depth: np.ndarray, yx: np.ndarray, T_tr: np.ndarray, K: 
     X = np.stack([(yx[:, 1] - cx) / fx * z, (yx[:, 0] - cy) / fy * z, z], axis=1)
     zt = X @ T_tr[2, :3] + T_tr[2, 3]
     return np.where((z > 0) & (zt > 0), zt, 0.0).astype(np.float32)
+
+
+def sample_reference(ref_rgb: np.ndarray, ref_valid: np.ndarray, target_yx: np.ndarray, z_target: np.ndarray,
+                     T_tr: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Colours (N, 3) uint8 of target pixels `target_yx` (N, 2) with depth `z_target` (N,) m, looked up in the
+    reference at the exact sub-pixel point they come from (bilinear), and a bool (N,) that is False where a
+    bilinear neighbour is not `ref_valid` (a moving object's pixel must not bleed in; keep the splat's pixel).
+
+    The splat says which reference pixel lands on a target pixel, rounded to whole pixels both ways; sampling
+    back through the target pixel's centre removes that half-pixel misalignment on textured backgrounds."""
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    X = np.stack([(target_yx[:, 1] - cx) / fx * z_target, (target_yx[:, 0] - cy) / fy * z_target, z_target], 1)
+    T_rt = np.linalg.inv(T_tr)
+    Xr = X @ T_rt[:3, :3].T + T_rt[:3, 3]
+    zr = np.maximum(Xr[:, 2], 1e-6)
+    u = (fx * Xr[:, 0] / zr + cx).astype(np.float32)
+    v = (fy * Xr[:, 1] / zr + cy).astype(np.float32)
+    n, cols = len(u), 1024  # remap wants maps under 32767 wide: sample the N points as a (rows, 1024) image
+    rows = max(1, -(-n // cols))
+    pad = rows * cols - n
+    rgb = cv2.remap(ref_rgb, np.pad(u, (0, pad)).reshape(rows, cols), np.pad(v, (0, pad)).reshape(rows, cols),
+                    cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3)[:n]
+    h, w = ref_valid.shape
+    x0, y0 = np.floor(u).astype(int), np.floor(v).astype(int)
+    ok = (Xr[:, 2] > 1e-3) & (x0 >= 0) & (y0 >= 0) & (x0 + 1 < w) & (y0 + 1 < h)
+    xs, ys = np.clip(x0, 0, w - 2), np.clip(y0, 0, h - 2)
+    ok &= ref_valid[ys, xs] & ref_valid[ys, xs + 1] & ref_valid[ys + 1, xs] & ref_valid[ys + 1, xs + 1]
+    return rgb, ok

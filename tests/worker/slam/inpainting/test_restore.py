@@ -60,6 +60,19 @@ def test_restore_rgb_and_depth_from_moved_references():
     assert np.all(out.depth_confidence[~hole] == 0)
 
 
+def test_subpixel_sampling_beats_the_nearest_splatted_pixel():
+    tex = texture(2)
+    T_tgt = pose(0.0)
+    rgb, depth = render(T_tgt, tex)
+    T_ref = pose(0.0123, 0.0071, 0.37)  # a motion that lands reference pixels between target pixels
+    r_rgb, r_depth = render(T_ref, tex)
+    ref = ReferenceView(r_rgb, r_depth, T_ref, np.zeros((H, W), bool))
+    hole = person_hole()
+    near = restore_frame(rgb, depth, hole, T_tgt, [ref], K, RestorationConfig(subpixel=False))
+    sub = restore_frame(rgb, depth, hole, T_tgt, [ref], K)
+    assert psnr(sub.rgb, rgb, hole) > psnr(near.rgb, rgb, hole) + 1.0
+
+
 def test_reference_dynamic_pixels_are_never_copied():
     tex = texture(3)
     T_tgt = pose(0.0)
