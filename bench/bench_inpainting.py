@@ -76,7 +76,8 @@ def bench_sequence(root: Path, camera: str, n_frames: int, offline: bool, config
     depth = {"pm_depth_med": float(np.median(err)) if len(err) else np.nan,
              "depth_p90": float(np.percentile(err, 90)) if len(err) else np.nan,
              "depth_bad": float(np.mean(err > 0.10)) if len(err) else np.nan}
-    return {k: float(np.nanmean(v)) for k, v in rows.items()} | depth | {"frames": len(picks)}
+    means = {k: float(np.nanmean(v)) if np.isfinite(np.asarray(v, float)).any() else np.nan for k, v in rows.items()}
+    return means | depth | {"frames": len(picks)}
 
 
 def bench_speed(root: Path, camera: str, config: RestorationConfig, index: int = 60) -> None:
