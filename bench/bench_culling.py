@@ -1,0 +1,71 @@
+"""Culling cost per frame on real images: `cull_frame` alone, guided vs brute-force matching.
+
+    .venv/bin/python bench/bench_culling.py SEQ_DIR [--camera 7scenes] [--frames 60] [--lag 10]
+
+SEQ_DIR is a sequence with truth (`vtdslam augment` / `vtdslam synth` output): its truth masks stand in for the
+segmentation and its ground-truth poses, perturbed by 5 mm and 0.3° like a motion-model prediction, give the
+predicted relative pose, so the figures isolate culling from the network and the tracker. ORB extraction is
+not included (tracking needs it anyway). CPU time of the process, so machine load does not inflate it much.
+Benchmarks print figures; they assert nothing.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from worker.slam.camera import parse_camera  # noqa: E402
+from worker.slam.config import PipelineConfig  # noqa: E402
+from worker.slam.dynamic.culling import CullingConfig, cull_frame  # noqa: E402
+from worker.slam.features.orb import OrbExtractor  # noqa: E402
+from worker.slam.io.sequence import Sequence  # noqa: E402
+from worker.slam.tracking.se3 import inv  # noqa: E402
+from worker.slam.truth import load_truth  # noqa: E402
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("sequence", type=Path)
+    ap.add_argument("--camera", default="7scenes")
+    ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--lag", type=int, default=10)
+    args = ap.parse_args()
+    seq, truth = Sequence(args.sequence, parse_camera(args.camera)), load_truth(args.sequence)
+    extractor = OrbExtractor(PipelineConfig().features)
+    gt_idx, gt_poses = seq.groundtruth_for_frames()
+    pose = dict(zip(gt_idx.tolist(), gt_poses))
+    noise = np.eye(4)
+    noise[:3, :3] = Rotation.from_euler("y", 0.3, degrees=True).as_matrix()
+    noise[:3, 3] = [0.005, 0, 0]
+    frames = []
+    for i in range(min(args.frames + args.lag, len(seq))):
+        f = seq[i]
+        frames.append((extractor.extract(cv2.cvtColor(f.rgb, cv2.COLOR_RGB2GRAY), f.depth), f.depth,
+                       truth.mask(i), pose.get(i)))
+    K = seq.camera.K
+    print(f"| {args.sequence.name}, lag {args.lag} | frames | matches | guided | CPU ms median | CPU ms p90 |")
+    print("|---|---|---|---|---|---|")
+    for label, use_pose in (("brute force", False), ("guided", True)):
+        ts, n, guided = [], [], 0
+        for k in range(args.lag, len(frames)):
+            (fp, dp, _, Tp), (fc, dc, mc, Tc) = frames[k - args.lag], frames[k]
+            T = noise @ inv(Tc) @ Tp if use_pose and Tp is not None and Tc is not None else None
+            t0 = time.process_time()
+            res = cull_frame(fp.uv, fp.desc, fc.uv, fc.desc, dc, mc, None, CullingConfig(), dp, K, T)
+            ts.append(1000 * (time.process_time() - t0))
+            n.append(res.matches)
+            guided += res.guided
+        print(f"| {label} | {len(ts)} | {np.median(n):.0f} | {guided} | {np.median(ts):.1f} | "
+              f"{np.percentile(ts, 90):.1f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
