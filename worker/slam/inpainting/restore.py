@@ -106,18 +106,23 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
     out_rgb = rgb.copy()
     geo = init_src >= 0
     if config.geometry_first and geo.any():
-        out_rgb[py[geo], px[geo]] = np.stack(sources)[init_src[geo], init_yx[geo, 0], init_yx[geo, 1]]
-        if config.subpixel:
-            for s, ref in enumerate(refs):
-                sel = np.flatnonzero(geo & (init_src == s))
+        for s, ref in enumerate(refs):
+            sel = np.flatnonzero(geo & (init_src == s))
+            out_rgb[py[sel], px[sel]] = ref.rgb[init_yx[sel, 0], init_yx[sel, 1]]
+            if config.subpixel:
                 z = depth_in_target(ref.depth, init_yx[sel], rel[s], K)
                 col, ok = sample_reference(ref.rgb, ~ref.dynamic, np.stack([py[sel], px[sel]], 1), z, rel[s], K)
                 out_rgb[py[sel[ok]], px[sel[ok]]] = col[ok]
     search = ~geo if config.geometry_first else np.ones(len(py), bool)
     if search.any() and config.unseen_fill == "telea":
-        fill = np.zeros((h, w), np.uint8)
-        fill[py[search], px[search]] = 1
-        out_rgb = cv2.inpaint(out_rgb, fill, 3, cv2.INPAINT_TELEA)
+        # on the fill's bounding box (+ the inpainting radius): the same result without whole-image passes
+        fy, fx = py[search], px[search]
+        y0, y1 = max(int(fy.min()) - 4, 0), min(int(fy.max()) + 5, h)
+        x0, x1 = max(int(fx.min()) - 4, 0), min(int(fx.max()) + 5, w)
+        fill = np.zeros((y1 - y0, x1 - x0), np.uint8)
+        fill[fy - y0, fx - x0] = 1
+        out_rgb[y0:y1, x0:x1] = cv2.inpaint(np.ascontiguousarray(out_rgb[y0:y1, x0:x1]), fill, 3,
+                                            cv2.INPAINT_TELEA)
         src_all[search], cost_all[search] = self_index, np.inf  # from the frame itself, with no depth
     elif search.any():
         # PatchMatch visits only the pixels it must fill, so its cost scales with them, not the image.
