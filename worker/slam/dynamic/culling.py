@@ -52,7 +52,7 @@ class CullingConfig:
     """Add the reprojection test with the previous frame's depth."""
     pnp_px: float = 2.0
     """RANSAC threshold of the depth test's PnP; wider lets a wrong motion explain a moving object too."""
-    refine_min_inliers: float = 0.6
+    refine_min_inliers: float = 0.5
     """With a predicted pose, the depth test refines it (no RANSAC) when at least this fraction of the static
     points agree with it, else falls back to PnP-RANSAC."""
     reprojection_scale: float = 3.0
@@ -124,14 +124,13 @@ def _relative_pose(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndar
     PnP-RANSAC."""
     if T_init is not None:
         rvec, tvec = cv2.Rodrigues(T_init[:3, :3])[0], T_init[:3, 3].reshape(3, 1).copy()
-        gate = 4 * config.pnp_px  # the prediction is a few pixels off; the refinement then tightens it
-        for _ in range(2):
+        # the prediction can be several pixels off: refine on a wide gate first, then tighten it
+        for gate in (8 * config.pnp_px, 3 * config.pnp_px, config.pnp_px):
             err = np.linalg.norm(cv2.projectPoints(X, rvec, tvec, K, None)[0].reshape(-1, 2) - uv, axis=1)
             inl = err < gate
             if inl.sum() < max(6, config.refine_min_inliers * len(X)):
                 break
             rvec, tvec = cv2.solvePnPRefineLM(X[inl], uv[inl], K, None, rvec, tvec)
-            gate = config.pnp_px
         else:
             err = np.linalg.norm(cv2.projectPoints(X, rvec, tvec, K, None)[0].reshape(-1, 2) - uv, axis=1)
             if (err < config.pnp_px).mean() >= config.refine_min_inliers:
@@ -225,7 +224,10 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     p_prev, p_cur = kp_prev[m.prev_idx].astype(np.float64), kp_cur[m.cur_idx].astype(np.float64)
     xi, yi = _pixel(p_cur[:, 0], w), _pixel(p_cur[:, 1], h)
     point_label = labels[yi, xi]
-    scores = _scores(p_prev, p_cur, point_label == 0, prev_depth, K, config, T_cur_prev if m.guided else None) \
+    # Refining the predicted pose needs a clean static set; without segments moving points are in it, and a
+    # wide first gate would let them pull the pose along (RANSAC instead).
+    T_init = T_cur_prev if m.guided and use_sem else None
+    scores = _scores(p_prev, p_cur, point_label == 0, prev_depth, K, config, T_init) \
         if len(p_prev) >= 8 else np.zeros(len(p_prev))
     decisions = []
     n_labels = int(labels.max())
