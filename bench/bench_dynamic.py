@@ -45,7 +45,7 @@ def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, override
         "psnr": rt.get("restoration_psnr"), "depth_err": rt.get("restoration_depth_median_m"),
         "seg_ms": m["timings_ms"].get("segmentation"), "cull_ms": m["timings_ms"].get("culling"),
         "rest_ms": m["timings_ms"].get("restoration"), "fps": m.get("fps"),
-        "decision_ms": cull.get("decision_cpu_ms_median"),
+        "decision_ms": cull.get("decision_ms_median"),
         "guided": f"{cull['guided_matching_frames']}/{cull['frames_compared']}" if "frames_compared" in cull else "–",
     }
 
@@ -60,7 +60,7 @@ def main() -> None:
     overrides = json.loads(args.config) if args.config else None
     print("| sequence | preset | frames | tracked | ATE rmse (m) | RPE t (m/s) | RPE r (°/s) | static feats/frame "
           "| removed/frame | restored feats/frame | dyn. precision | dyn. recall | mask IoU | restore PSNR (dB) "
-          "| restore depth err (cm) | seg ms | cull ms (with ORB) | cull decision CPU ms | guided frames | restore ms | fps |")
+          "| restore depth err (cm) | seg ms | cull ms (with ORB) | cull decision ms | guided frames | restore ms | fps |")
     print("|" + "---|" * 21)
     for spec in args.sequence:
         seq_dir, _, camera = spec.rpartition(":")
