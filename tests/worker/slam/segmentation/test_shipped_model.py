@@ -24,8 +24,8 @@ def test_shipped_checkpoint_runs_on_real_frame(shared: Path) -> None:
 
 @pytest.mark.realdata
 def test_shipped_msnet_person_iou_on_walking_xyz(shared: Path) -> None:
-    """A regression floor at the measured level (0.15), not the issue's target (≥ 0.70, still open: see
-    weights/MODEL_CARD.md). A checkpoint that does worse than the shipped one fails here."""
+    """A regression floor just below the measured 0.697 (the issue's target is 0.70, see weights/MODEL_CARD.md).
+    A checkpoint that does clearly worse than the shipped one fails here."""
     folder = shared / "data" / "tum_frames" / "fr3_walking_xyz"
     rgb_path = next(folder.glob("rgb_*.png"), None)
     mask_path = next(folder.glob("person_mask_*.png"), None)
@@ -36,5 +36,5 @@ def test_shipped_msnet_person_iou_on_walking_xyz(shared: Path) -> None:
     gt = tum_person_mask(cv2.imread(str(mask_path), cv2.IMREAD_UNCHANGED))
     pred = res.class_mask("person")
     iou = np.logical_and(pred, gt).sum() / np.logical_or(pred, gt).sum()
-    assert iou >= 0.12, f"person IoU {iou:.3f} fell below the shipped checkpoint's 0.15"
+    assert iou >= 0.65, f"person IoU {iou:.3f} fell below the shipped checkpoint's 0.697"
     assert res.dynamic_mask()[pred].all()

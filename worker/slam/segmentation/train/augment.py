@@ -49,9 +49,13 @@ def warp(img: np.ndarray, a: np.ndarray, out_hw: tuple[int, int], nearest: bool 
     return out[..., None] if out.ndim == 2 and img.ndim == 3 else out
 
 
-def color_jitter(rng: np.random.Generator, rgb: np.ndarray, strength: float = 0.25) -> np.ndarray:
-    """Brightness, contrast and saturation jitter plus mild noise; RGB uint8 in and out."""
+def color_jitter(rng: np.random.Generator, rgb: np.ndarray, strength: float = 0.25,
+                 channel_gain: float = 0.0) -> np.ndarray:
+    """Brightness, contrast and saturation jitter plus mild noise, and optionally a per-channel gain of up to
+    +-channel_gain (white balance); RGB uint8 in and out."""
     x = rgb.astype(np.float32)
+    if channel_gain > 0:
+        x = x * rng.uniform(1 - channel_gain, 1 + channel_gain, 3).astype(np.float32)
     x = x * rng.uniform(1 - strength, 1 + strength) + rng.uniform(-20, 20) * strength * 4
     mean = x.mean()
     x = (x - mean) * rng.uniform(1 - strength, 1 + strength) + mean

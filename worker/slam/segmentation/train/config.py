@@ -26,11 +26,37 @@ class TrainConfig:
     coco_names: dict[str, str] = field(default_factory=lambda: {"person": "person", "chair": "chair"})
     """COCO category name -> our class name."""
     holdout_every: int = 5
-    """Every n-th labelled image (sorted by path) is held out for validation and never trained on."""
+    """Every n-th labelled image (sorted by path) is held out as the test split and never trained on."""
+    val_every: int = 0
+    """Every n-th of the remaining (training) images is carved out as a validation split for checkpoint and
+    AdaBN selection, so that the held-out test split is not used for selection; 0 validates on the held-out
+    split (the old behaviour)."""
     backgrounds: tuple[str, ...] = ("{shared}/data/7scenes_redkitchen/data/*.color.jpg",)
     """Globs of unlabelled background frames for copy-paste and distillation (assumed free of people)."""
     background_stride: int = 2
     """Use every n-th background frame (neighbouring video frames are near-duplicates)."""
+    target_frames: tuple[str, ...] = ()
+    """Globs of unlabelled target-domain frames that may contain people (e.g. TUM walking_halfsphere). They are
+    trained on with the teacher's soft labels (its person mass kept), with strong crops, zoom, flips and colour
+    jitter; their teacher person masks also give person cut-outs. They are training frames, not held out."""
+    p_target: float = 0.0
+    """Probability that a sample is a target frame (teacher-labelled) rather than a labelled image or composite."""
+    p_target_background: float = 0.0
+    """Probability that a composite is built on a target frame (its teacher labels, people included) rather
+    than on a people-free background."""
+    target_scale: tuple[float, float] = (1.0, 2.5)
+    """Zoom range of target-frame crops (1 = the whole frame fills the input)."""
+    target_jitter: float = 0.4
+    """Colour-jitter strength for target-frame samples (plus a per-channel gain: white balance)."""
+    target_confidence: float = 0.8
+    """Target frames get a hard label only where the teacher's top probability reaches this; elsewhere the
+    soft label alone trains them."""
+    forbidden: tuple[str, ...] = ("{shared}/data/tum_frames/fr3_walking_xyz",)
+    """Folders that must never feed training, validation or BN statistics (the test frame); a config whose
+    globs reach into them is rejected."""
+    bn_extra_frames: tuple[str, ...] = ()
+    """Extra globs added to the AdaBN frames (e.g. the target frames). The trainer validates the EMA weights
+    without AdaBN, with AdaBN on the backgrounds and with these added, and keeps the best on validation."""
     teacher: str | None = "{shared}/models/deeplabv3_257_mv_gpu.tflite"
     """TFLite teacher for soft labels; None trains on labels and pasted masks only."""
     cache_dir: str = "/tmp/msnet_cache"
@@ -109,10 +135,15 @@ def _from_dict(base: TrainConfig, data: dict) -> TrainConfig:
 
 
 def presets() -> dict[str, TrainConfig]:
-    """`cpu`: the recipe of the shipped checkpoint. `paper`: the paper's hyper-parameters (for a GPU).
+    """`cpu-tum`: the recipe of the shipped checkpoint (adds teacher distillation on the TUM walking_halfsphere
+    frames). `cpu`: the previous recipe (no TUM frames). `paper`: the paper's hyper-parameters (for a GPU).
     `smoke`: seconds-long run for tests."""
     cpu = TrainConfig(time_budget_min=58.0)
+    halfsphere = "{shared}/data/tum_frames/fr3_walking_halfsphere/*.png"
+    cpu_tum = replace(cpu, time_budget_min=75.0, epochs=100, val_every=6, target_frames=(halfsphere,),
+                      p_target=0.3, p_labelled=0.3, p_target_background=0.3, bn_extra_frames=(halfsphere,))
     return {
+        "cpu-tum": cpu_tum,
         "cpu": cpu,
         "paper": replace(cpu, lr=1e-3, epochs=64, batch_size=4, samples_per_epoch=20000, workers=4, threads=0,
                          time_budget_min=None, model=replace(cpu.model, dropout=0.56)),

@@ -3,9 +3,10 @@ teacher soft labels (cached)."""
 from __future__ import annotations
 
 import glob
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from worker.slam.errors import ConfigError
@@ -27,6 +28,15 @@ from worker.slam.segmentation.train.teacher_cache import soft_labels
 class TrainingData:
     train: MixtureDataset
     held_out: list[LabelledImage]
+    """The test split (every `holdout_every`-th image); validated on only when there is no `val` split."""
+    val: list[LabelledImage] = field(default_factory=list)
+    """Validation split carved out of the training images (`val_every`), used for selection."""
+    targets: SoftSet | None = None
+    """Target-domain training frames with teacher probabilities (for the training-set agreement figure)."""
+
+    @property
+    def selection(self) -> list[LabelledImage]:
+        return self.val or self.held_out
 
 
 def load_labelled(cfg: TrainConfig) -> list[LabelledImage]:
@@ -41,11 +51,42 @@ def load_labelled(cfg: TrainConfig) -> list[LabelledImage]:
     return items
 
 
-def find_backgrounds(cfg: TrainConfig) -> list[Path]:
+def expand(cfg: TrainConfig, patterns: tuple[str, ...]) -> list[Path]:
+    """Sorted files matching the globs; refuses any file inside a `forbidden` folder (the test frames)."""
     paths: list[Path] = []
-    for pattern in cfg.backgrounds:
+    for pattern in patterns:
         paths += sorted(Path(p) for p in glob.glob(str(cfg.path(pattern))))
-    return paths[::max(cfg.background_stride, 1)]
+    check_allowed(cfg, paths)
+    return paths
+
+
+def check_allowed(cfg: TrainConfig, paths) -> None:
+    bad = [cfg.path(f).resolve() for f in cfg.forbidden]
+    for p in paths:
+        rp = Path(p).resolve()
+        for b in bad:
+            if rp == b or b in rp.parents:
+                raise ConfigError(f"{p} is inside a forbidden (test) folder {b}; it must not be trained on")
+
+
+def find_backgrounds(cfg: TrainConfig) -> list[Path]:
+    return expand(cfg, cfg.backgrounds)[::max(cfg.background_stride, 1)]
+
+
+def target_cutouts(cfg: TrainConfig, targets: SoftSet) -> list[Cutout]:
+    """Person cut-outs from the teacher's person masks on the target frames (one per connected component)."""
+    if targets.soft is None or "person" not in cfg.model.classes:
+        return []
+    p = cfg.model.classes.index("person")
+    out: list[Cutout] = []
+    for path, soft in zip(targets.images, targets.soft):
+        rgb = read_rgb(path)
+        prob = cv2.resize(np.ascontiguousarray(soft[..., p]), (rgb.shape[1], rgb.shape[0]),
+                          interpolation=cv2.INTER_LINEAR)
+        n, comp = cv2.connectedComponents((prob > 127).astype(np.uint8))
+        out += extract_cutouts(rgb, [((comp == i).astype(np.uint8), p) for i in range(1, n)], min_height=80,
+                               min_area=3000)
+    return out
 
 
 DISTRACTOR = "__distractor__"
@@ -78,8 +119,11 @@ def build_cutouts(cfg: TrainConfig, items: list[LabelledImage]) -> list[Cutout]:
 
 def build_training_data(cfg: TrainConfig) -> TrainingData:
     items = load_labelled(cfg)
+    check_allowed(cfg, [i.image for i in items])
     train, held = split_holdout(items, cfg.holdout_every) if cfg.holdout_every > 1 else (items, [])
+    train, val = split_holdout(train, cfg.val_every) if cfg.val_every > 1 else (train, [])
     backgrounds = find_backgrounds(cfg)
+    target_paths = expand(cfg, cfg.target_frames)
     if not train and not backgrounds:
         raise ConfigError("no training data: neither labelled images nor backgrounds were found")
     train_soft = bg_soft = None
@@ -92,7 +136,15 @@ def build_training_data(cfg: TrainConfig) -> TrainingData:
             train_soft = soft_labels(teacher, [i.image for i in train], cfg.model.classes, cache)
         if backgrounds:
             bg_soft = soft_labels(teacher, backgrounds, cfg.model.classes, cache)
+    targets = None
+    if target_paths:
+        if cfg.teacher is None:
+            raise ConfigError("target_frames need a teacher (they are unlabelled)")
+        targets = SoftSet(target_paths, np.asarray(soft_labels(cfg.path(cfg.teacher), target_paths,
+                                                               cfg.model.classes, Path(cfg.cache_dir))))
+    cutouts = build_cutouts(cfg, train) + build_cutouts(cfg, load_distractors(cfg, train))
+    if targets is not None:
+        cutouts += target_cutouts(cfg, targets)
     dataset = MixtureDataset(cfg, train, None if train_soft is None else np.asarray(train_soft),
-                             SoftSet(backgrounds, None if bg_soft is None else np.asarray(bg_soft)),
-                             build_cutouts(cfg, train) + build_cutouts(cfg, load_distractors(cfg, train)))
-    return TrainingData(dataset, held)
+                             SoftSet(backgrounds, None if bg_soft is None else np.asarray(bg_soft)), cutouts, targets)
+    return TrainingData(dataset, held, val, targets)

@@ -28,7 +28,7 @@ class MixtureDataset(Dataset):
     teacher probabilities and kd_mask (H, W) float (1 where a soft label exists)."""
 
     def __init__(self, cfg: TrainConfig, labelled: list[LabelledImage], labelled_soft: np.ndarray | None,
-                 backgrounds: SoftSet, cutouts: list[Cutout]) -> None:
+                 backgrounds: SoftSet, cutouts: list[Cutout], targets: SoftSet | None = None) -> None:
         self.cfg = cfg
         self.classes = cfg.model.classes
         self.out_hw = cfg.model.input_size
@@ -38,6 +38,7 @@ class MixtureDataset(Dataset):
             else []
         self.chairs = [c for c in cutouts if c.label not in (0, self.classes.index("person"))] if cutouts else []
         self.distractors = [c for c in cutouts if c.label == 0]
+        self.targets = targets if targets is not None and targets.images else None
 
     def __len__(self) -> int:
         return self.cfg.samples_per_epoch
@@ -57,13 +58,31 @@ class MixtureDataset(Dataset):
         hard = warp(semantic_mask(item, self.classes), a, self.out_hw, nearest=True, border=IGNORE)
         return img, hard, self._soft(self.labelled_soft, k, a, rgb.shape[:2]), a
 
+    def _target(self, rng: np.random.Generator):
+        """A target-domain frame with the teacher's labels (people kept): soft everywhere, hard where confident."""
+        k = int(rng.integers(len(self.targets.images)))
+        rgb = read_rgb(self.targets.images[k])
+        a = random_affine(rng, rgb.shape[:2], self.out_hw, self.cfg.target_scale)
+        img = warp(rgb, a, self.out_hw)
+        soft = self._soft(self.targets.soft, k, a, rgb.shape[:2])
+        return img, self._confident(soft), soft
+
+    def _confident(self, soft: np.ndarray) -> np.ndarray:
+        hard = soft.argmax(-1).astype(np.uint8)
+        hard[soft.max(-1) < self.cfg.target_confidence * 255] = IGNORE
+        return hard
+
     def _composite(self, rng: np.random.Generator):
-        k = int(rng.integers(len(self.backgrounds.images)))
-        rgb = read_rgb(self.backgrounds.images[k])
+        on_target = self.targets is not None and rng.random() < self.cfg.p_target_background
+        source = self.targets if on_target else self.backgrounds
+        k = int(rng.integers(len(source.images)))
+        rgb = read_rgb(source.images[k])
         a = random_affine(rng, rgb.shape[:2], self.out_hw, (1.0, 1.5))
         img = warp(rgb, a, self.out_hw)
-        soft = self._soft(self.backgrounds.soft, k, a, rgb.shape[:2])
-        if soft is None:
+        soft = self._soft(source.soft, k, a, rgb.shape[:2])
+        if on_target:
+            pass  # the teacher's people are real people here
+        elif soft is None:
             soft = np.zeros((*self.out_hw, len(self.classes)), np.uint8)
             soft[..., 0] = 255
         elif "person" in self.classes:
@@ -72,7 +91,7 @@ class MixtureDataset(Dataset):
             soft = soft.copy()
             soft[..., 0] = np.clip(soft[..., 0].astype(np.int32) + soft[..., p], 0, 255).astype(np.uint8)
             soft[..., p] = 0
-        hard = soft.argmax(-1).astype(np.uint8)
+        hard = self._confident(soft) if on_target else soft.argmax(-1).astype(np.uint8)
         for _ in range(int(rng.integers(0, self.cfg.max_pastes + 1))):
             if self.distractors and rng.random() < self.cfg.p_distractor_paste:
                 cut = self.distractors[int(rng.integers(len(self.distractors)))]
@@ -88,7 +107,12 @@ class MixtureDataset(Dataset):
         # The sampler encodes the epoch in the index, so persistent workers need no state updates.
         epoch, index = divmod(index, len(self))
         rng = np.random.default_rng([self.cfg.seed, epoch, index])
-        if self.labelled and (not self.backgrounds.images or rng.random() < self.cfg.p_labelled):
+        r = rng.random()
+        p_target = self.cfg.p_target if self.targets is not None else 0.0
+        target = r < p_target
+        if target:
+            img, hard, soft = self._target(rng)
+        elif self.labelled and (not self.backgrounds.images or r < p_target + self.cfg.p_labelled):
             img, hard, soft, _ = self._labelled(rng, int(rng.integers(len(self.labelled))))
         else:
             img, hard, soft = self._composite(rng)
@@ -96,7 +120,7 @@ class MixtureDataset(Dataset):
             img = soften(rng, img)
         elif rng.random() < 0.3:
             img = cv2.GaussianBlur(img, (3, 3), rng.uniform(0.3, 1.2))
-        img = color_jitter(rng, img)
+        img = color_jitter(rng, img, self.cfg.target_jitter, channel_gain=0.12) if target else color_jitter(rng, img)
         k = len(self.classes)
         if soft is None:
             soft_t = torch.zeros(k, *self.out_hw)

@@ -21,10 +21,10 @@ from worker.slam.segmentation.msnet.model import MSNet, build_msnet
 from worker.slam.segmentation.msnet.segmenter import pick_device
 from worker.slam.segmentation.train.config import TrainConfig
 from worker.slam.segmentation.train.bn_recalibration import recalibrate_bn
-from worker.slam.segmentation.train.data import build_training_data, find_backgrounds
+from worker.slam.segmentation.train.data import build_training_data, expand, find_backgrounds
 from worker.slam.segmentation.train.datasets import LabelledImage, semantic_mask
 from worker.slam.segmentation.train.losses import msnet_loss
-from worker.slam.segmentation.train.mixture import EpochSampler
+from worker.slam.segmentation.train.mixture import EpochSampler, SoftSet
 
 
 def seed_everything(seed: int) -> None:
@@ -70,6 +70,42 @@ def validate(model: MSNet, items: list[LabelledImage], device: torch.device) -> 
     return {"val_miou": m.miou, "val_mpa": m.mpa, "val_iou": m.iou, "val_acc": m.pixel_acc}
 
 
+@torch.inference_mode()
+def target_agreement(model: MSNet, targets: SoftSet | None, device: torch.device) -> dict:
+    """Person IoU (pooled) between the model and the teacher's argmax on the target frames, at the model's
+    input size. These frames are training data when `target_frames` is set: a training-set figure."""
+    if targets is None or targets.soft is None or "person" not in model.cfg.classes:
+        return {}
+    model.eval()
+    p, (h, w) = model.cfg.classes.index("person"), model.cfg.input_size
+    inter = union = 0
+    for path, soft in zip(targets.images, targets.soft):
+        rgb = cv2.resize(read_rgb(path), (w, h), interpolation=cv2.INTER_AREA)
+        teacher = cv2.resize(np.ascontiguousarray(soft), (w, h), interpolation=cv2.INTER_LINEAR).argmax(-1) == p
+        x = torch.from_numpy(rgb).permute(2, 0, 1)[None].float().div(255).to(device)
+        pred = model(x).logits.argmax(1)[0].cpu().numpy() == p
+        inter += int(np.logical_and(pred, teacher).sum())
+        union += int(np.logical_or(pred, teacher).sum())
+    model.train()
+    return {"train_target_agreement": inter / union if union else 1.0}
+
+
+def selection_score(record: dict) -> float:
+    """Validation person IoU (the pipeline's main class), else validation mIoU."""
+    iou = record.get("val_iou", {}).get("person")
+    return float(iou if iou is not None else record.get("val_miou", 0.0))
+
+
+def evaluate_all(model: MSNet, data, device: torch.device) -> dict:
+    record = validate(model, data.selection, device) if data.selection else {}
+    if record and data.val:
+        record["val_split"] = "val"
+    elif record:
+        record["val_split"] = "held-out"
+    record.update(target_agreement(model, data.targets, device))
+    return record
+
+
 def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path:
     """Train MSNET as `cfg` says; returns the path of the weights-only checkpoint (`out_dir/msnet.pt`)."""
     out = Path(cfg.out_dir)
@@ -77,6 +113,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     seed_everything(cfg.seed)
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
+        cv2.setNumThreads(cfg.threads)
     device = pick_device(cfg.device)
     data = build_training_data(cfg)
     model = build_msnet(cfg.model).to(device)
@@ -136,24 +173,54 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         record = {"epoch": epoch + 1, "step": step, "lr": opt.param_groups[0]["lr"], "elapsed_s": round(elapsed, 1),
                   **{k: v / max(n, 1) for k, v in sums.items()}}
         final = ema.module if ema is not None else model
-        if data.held_out:
-            record.update(validate(final, data.held_out, device))
+        record.update(evaluate_all(final, data, device))
         with open(out / "metrics.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
         torch.save({"model": model.state_dict(), "optimizer": opt.state_dict(), "torch_rng": torch.get_rng_state(),
                     "epoch": epoch + 1, "step": step, "elapsed_s": elapsed,
                     "ema": ema.state_dict() if ema is not None else None}, state_path.with_suffix(".tmp"))
         state_path.with_suffix(".tmp").replace(state_path)
-        save_model(out / "msnet.pt", final, {"epoch": epoch + 1, "train_seconds": round(elapsed, 1),
-                                             "train_config": cfg.to_dict(), **{k: v for k, v in record.items()
-                                                                               if k.startswith("val_")}})
+        meta = {"epoch": epoch + 1, "train_seconds": round(elapsed, 1), "train_config": cfg.to_dict(),
+                **{k: v for k, v in record.items() if k.startswith(("val_", "train_target"))}}
+        save_model(out / "msnet.pt", final, meta)
+        save_model(out / f"epoch{epoch + 1:03d}.pt", final, meta)  # for later inspection and selection
         if progress_of(step, total_steps, elapsed, cfg.time_budget_min) >= 1.0:
             break
-    frames = find_backgrounds(replace(cfg, background_stride=1))[::max(cfg.bn_recalibration_stride, 1)]
-    if cfg.bn_recalibration_stride > 0 and frames:
-        tuned = recalibrate_bn(ema.module if ema is not None else model, frames)
-        meta = {"bn_recalibrated_on": len(frames), "train_config": cfg.to_dict(), "train_seconds": round(elapsed, 1)}
-        if data.held_out:
-            meta.update(validate(tuned, data.held_out, device))
-        save_model(out / "msnet.pt", tuned, meta)
+    weights = {"ema": ema.module, "raw": model} if ema is not None else {"raw": model}
+    finish(cfg, weights, data, device, out, {"train_config": cfg.to_dict(), "train_seconds": round(elapsed, 1),
+                                             "epoch": state_epoch(out)})
     return out / "msnet.pt"
+
+
+def state_epoch(out: Path) -> int | None:
+    lines = (out / "metrics.jsonl").read_text().splitlines() if (out / "metrics.jsonl").is_file() else []
+    return json.loads(lines[-1])["epoch"] if lines else None
+
+
+def finish(cfg: TrainConfig, weights: dict[str, MSNet], data, device: torch.device, out: Path, meta: dict) -> dict:
+    """Candidates: each of `weights` (the EMA and the raw final weights) as trained, with BN statistics
+    re-estimated (AdaBN) on the backgrounds, and on the backgrounds plus `bn_extra_frames`. Each is validated
+    (never on the test split when a `val` split exists); the best by `selection_score` becomes `msnet.pt`.
+    The old recipe (no val split, no extra BN frames) keeps its rule: the first weights with AdaBN on the
+    backgrounds. Returns the candidates' records (also written to `adabn.json`)."""
+    frames = find_backgrounds(replace(cfg, background_stride=1))[::max(cfg.bn_recalibration_stride, 1)]
+    frames = frames if cfg.bn_recalibration_stride > 0 else []
+    extra = expand(cfg, cfg.bn_extra_frames) if frames else []
+    candidates, n_bn = {}, {}
+    for name, model in weights.items():
+        candidates[f"{name}"], n_bn[f"{name}"] = model, 0
+        if frames:
+            candidates[f"{name}+adabn"], n_bn[f"{name}+adabn"] = recalibrate_bn(model, frames), len(frames)
+        if extra:
+            key = f"{name}+adabn-extra"
+            candidates[key], n_bn[key] = recalibrate_bn(model, frames + extra), len(frames) + len(extra)
+    records = {name: evaluate_all(m, data, device) for name, m in candidates.items()}
+    first = next(iter(weights))
+    if (cfg.bn_extra_frames or cfg.val_every) and any(records.values()):
+        best = max(records, key=lambda k: selection_score(records[k]))
+    else:
+        best = f"{first}+adabn" if frames else first
+    (out / "adabn.json").write_text(json.dumps({"chosen": best, "candidates": records}, indent=2))
+    save_model(out / "msnet.pt", candidates[best].eval(), {**meta, "weights": best, "bn_recalibrated_on": n_bn[best],
+                                                           **records[best]})
+    return records
