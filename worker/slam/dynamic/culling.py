@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from worker.slam.dynamic.epipolar import (Matches, epipolar_distance, fundamental_ransac, match_guided,
                                           match_orb, predict_positions)
@@ -77,8 +78,23 @@ class CullingConfig:
     segmentation missed (0 = off); see `segments.grow_by_depth`."""
     grow_rel_depth: float = 0.15
     """Relative depth tolerance of that growth around the segment's median depth."""
-    dilation_px: int = 3
-    """The exclude mask is the dynamic mask dilated by this many pixels (keypoints sit on object borders)."""
+    local_px: float = 48.0
+    """Dynamic segments larger than `local_min_area` are also judged locally: a pixel whose `local_k` nearest
+    matched points of the segment all lie within this distance and mostly agree with the static scene is kept.
+    A segmentation blob that spills from a walking person onto the static table beside them, at the same
+    depth, is then removed only where it moves. 0 = off."""
+    local_min_area: float = 0.05
+    """Fraction of the image above which a segment is judged locally."""
+    local_k: int = 5
+    local_step_px: int = 8
+    """Local decisions are made on a grid of this spacing and spread to its cells."""
+    dilation_px: int = 15
+    """The exclude mask is the dynamic mask dilated by this many pixels: half the ORB patch (31 px), since a
+    keypoint that close to a moving object describes its silhouette, which moves with it. On the augmented
+    sequence with true masks, ATE 0.049 / 0.033 / 0.025 / 0.023 m for 1 / 3 / 8 / 16 px (people-free: 0.023)."""
+    cluster_dilation_px: int = 3
+    """The same for the geometric clusters, whose regions are already whole grid cells wide (a wider band
+    there removed static features: geometry-only ATE +14 % on static 7-Scenes)."""
 
 
 @dataclass(frozen=True)
@@ -163,6 +179,50 @@ def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None) -> np.nda
     return score
 
 
+def _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr, config) -> np.ndarray:
+    """`dynamic` (H, W) with the static-looking parts of large dynamic segments kept (see `local_px`)."""
+    h, w = labels.shape
+    area = np.bincount(labels.ravel(), minlength=len(moving_label))
+    large = np.flatnonzero(area >= config.local_min_area * h * w)
+    large = large[large > 0]
+    if not len(large):
+        return dynamic
+    out = dynamic.copy()
+    s = config.local_step_px
+    gy, gx = np.mgrid[s // 2:h:s, s // 2:w:s]  # a coarse pixel grid, decided then spread to its cells
+    for lab in large[moving_label[large]]:
+        on = point_label == lab
+        if on.sum() < config.local_k:
+            continue
+        cell = labels[gy, gx] == lab
+        q = np.stack([gx[cell], gy[cell]], 1)
+        dist, idx = cKDTree(np.stack([xi[on], yi[on]], 1)).query(q, k=config.local_k)
+        # only towards "static": a few bad matches among a moving object's points must not keep it, but k
+        # nearby points that all agree with the static scene are not on it (one-way: a small moving part of a
+        # segment judged static is not looked for; k points are a weaker test than the whole segment's)
+        keep = (dist[:, -1] <= config.local_px) & (np.quantile(scores[on][idx], 0.5, axis=1) <= thr)
+        flag = np.zeros(cell.shape, np.uint8)
+        flag[cell] = keep
+        grid = cv2.resize(flag, (gx.shape[1] * s, gx.shape[0] * s), interpolation=cv2.INTER_NEAREST)[:h, :w]
+        grid = np.pad(grid, ((0, h - grid.shape[0]), (0, w - grid.shape[1])))
+        out[(labels == lab) & (grid > 0)] = False
+    return out
+
+
+def _dilate(mask: np.ndarray, px: int) -> np.ndarray:
+    """`mask` (H, W) bool grown by a disc of radius `px`, computed only around its bounding box."""
+    out = np.zeros_like(mask, dtype=bool)
+    x, y, w, h = cv2.boundingRect(mask.astype(np.uint8))
+    if w == 0 or px <= 0:
+        return mask.copy()
+    H, W = mask.shape
+    y0, y1, x0, x1 = max(y - px, 0), min(y + h + px, H), max(x - px, 0), min(x + w + px, W)
+    k = 2 * px + 1
+    out[y0:y1, x0:x1] = cv2.dilate(mask[y0:y1, x0:x1].astype(np.uint8),
+                                   cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
+    return out
+
+
 def _spread(idx: np.ndarray, n: int) -> np.ndarray:
     """At most `n` of `idx`, evenly spaced (deterministic, and spread over the keypoint order)."""
     return idx if len(idx) <= n else idx[np.linspace(0, len(idx) - 1, n).astype(int)]
@@ -241,20 +301,24 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
         decisions.append(SegmentDecision(lab, "semantic", len(s), float(np.median(s)) if len(s) else 0.0, moving))
         moving_label[lab] = moving
     dynamic = moving_label[labels]  # one pass over the image for all segments
+    if config.local_px > 0 and n_labels:
+        dynamic = _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr, config)
     if config.grow_px > 0:
         for lab in np.flatnonzero(moving_label):
             dynamic |= grow_by_depth(labels == lab, depth_cur, config.grow_px, config.grow_rel_depth,
                                      config.depth_jump)
+    exclude = _dilate(dynamic, config.dilation_px)
     if config.detect_unknown or not use_sem:
         moving_pts = scores > thr
+        clusters = np.zeros_like(dynamic)
         for k, region in enumerate(_geometric_clusters(p_cur, moving_pts, depth_cur, point_label > 0,
                                                        config)):
             inside = region[yi, xi]
             decisions.append(SegmentDecision(-(k + 1), "geometric", int(inside.sum()),
                                              float(np.median(scores[inside])) if inside.any() else 0.0, True))
-            dynamic |= region
-    k = 2 * config.dilation_px + 1
-    exclude = cv2.dilate(dynamic.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
+            clusters |= region
+        dynamic |= clusters
+        exclude |= _dilate(clusters, config.cluster_dilation_px)
     return CullingResult(dynamic, exclude, decisions, thr, entropy, len(p_prev), scores, p_cur, m.guided)
 
 
