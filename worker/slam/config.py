@@ -256,6 +256,12 @@ def _apply(obj: Any, values: dict, where: str) -> Any:
             raise ConfigError(f"invalid value in {where}: {exc}", detail={"field": where}) from exc
     for key, val in changes.items():
         setattr(obj, key, val)
+    check = getattr(obj, "__post_init__", None)
+    if check is not None and changes:
+        try:
+            check()
+        except ValueError as exc:
+            raise ConfigError(f"invalid value in {where}: {exc}", detail={"field": where}) from exc
     return obj
 
 

@@ -3,29 +3,17 @@ from __future__ import annotations
 
 import csv
 import json
+import shutil
 
 import pytest
 
 from worker.slam.config import get_preset
+from worker.slam.errors import ConfigError, SequenceFormatError
 from worker.slam.dynamic.stage import CullingStage
-from worker.slam.inpainting.stage import RestorationStage
 from worker.slam.io.sequence import Sequence
 from worker.slam.pipeline import run_pipeline
 from worker.slam.synth.generator import SynthConfig, generate_synthetic
 from worker.slam.truth import load_truth
-
-
-class OracleSegmentation:
-    """Potentially dynamic = the truth mask: isolates culling and restoration from the network."""
-
-    name = "segmentation"
-
-    def __init__(self, root) -> None:
-        self.truth = load_truth(root)
-
-    def process(self, frame, inputs, ctx):
-        inputs.potentially_dynamic = self.truth.mask(frame.index)
-        return inputs
 
 
 @pytest.fixture(scope="module")
@@ -37,14 +25,19 @@ def dyn_seq(tmp_path_factory):
 
 
 def run(root, preset, out, oracle=True):
-    seq = Sequence(root)
-    cfg = get_preset(preset)
-    stages = None
-    if oracle:
-        stages = [OracleSegmentation(root), CullingStage(cfg, seq.camera)]
-        if "restoration" in cfg.stages:
-            stages.append(RestorationStage(cfg, seq.camera))
-    return run_pipeline(seq, cfg, out, stages=stages)
+    """`oracle`: potentially dynamic = the truth mask, which isolates culling and restoration from the network."""
+    cfg = get_preset(preset, {"segmentation": {"source": "truth"}} if oracle else None)
+    return run_pipeline(Sequence(root), cfg, out)
+
+
+def test_truth_segmentation_needs_truth_and_a_known_source(tmp_path):
+    static = tmp_path / "static"
+    generate_synthetic(static, SynthConfig(frames=3, people=0, seed=1, shared_dir=tmp_path / "noshared"))
+    (static / "truth").exists() and shutil.rmtree(static / "truth")
+    with pytest.raises(SequenceFormatError, match="truth/ masks"):
+        run(static, "no-restoration", tmp_path / "out")
+    with pytest.raises(ConfigError, match="source"):
+        get_preset("no-restoration", {"segmentation": {"source": "oracle"}})
 
 
 def test_full_pipeline_culls_restores_and_reports(dyn_seq, tmp_path):
@@ -53,7 +46,8 @@ def test_full_pipeline_culls_restores_and_reports(dyn_seq, tmp_path):
     assert m["tracked"] == 45 and m["ate"]["rmse"] < 0.05
     assert m["culling"]["features_removed"] > 0
     truth = m["culling"]["truth"]
-    assert truth["feature_precision"] > 0.8 and truth["frames_scored"]["mask"] == 44
+    # the truth counts removed keypoints more than 3 px off the object as false: the 15 px band costs precision
+    assert truth["feature_precision"] > 0.7 and truth["frames_scored"]["mask"] == 44
     assert m["restoration"]["restored_frames"] > 0 and m["restoration"]["truth"]["restoration_psnr"] > 10
     assert {"culling", "restoration", "tracking"} <= set(m["timings_ms"])
     with (tmp_path / "frame_stats.csv").open() as fh:

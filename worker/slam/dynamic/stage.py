@@ -15,6 +15,7 @@ import numpy as np
 
 from worker.slam.camera import Camera
 from worker.slam.dynamic.culling import CullingConfig, cull_frame
+from worker.slam.errors import SequenceFormatError
 from worker.slam.features.types import Features
 from worker.slam.io.sequence import Frame
 from worker.slam.segmentation.base import SegmenterConfig, make_segmenter
@@ -28,6 +29,13 @@ class SegmentationStageConfig:
 
     segmenter: SegmenterConfig = field(default_factory=lambda: SegmenterConfig(threads=1))
     """One inference thread by default: on a shared 2-core CPU two torch threads ran ~10x slower."""
+    source: str = "network"
+    """`network` (the segmenter above) or `truth`: the sequence's true dynamic masks (`truth/masks`, from the
+    synthetic and augmented generators), an oracle that separates culling's errors from segmentation's."""
+
+    def __post_init__(self) -> None:
+        if self.source not in ("network", "truth"):
+            raise ValueError(f"segmentation.source must be 'network' or 'truth', not {self.source!r}")
 
 
 @dataclass
@@ -55,10 +63,17 @@ class SegmentationStage:
     name = "segmentation"
 
     def __init__(self, config, camera: Camera) -> None:
-        self.segmenter = make_segmenter(config.section("segmentation").segmenter)
+        cfg: SegmentationStageConfig = config.section("segmentation")
+        self.segmenter = make_segmenter(cfg.segmenter) if cfg.source == "network" else None
 
     def process(self, frame: Frame, inputs, ctx):
-        mask = self.segmenter.segment(frame.rgb).dynamic_mask()
+        if self.segmenter is None:
+            if ctx.truth is None:
+                raise SequenceFormatError("segmentation.source 'truth' needs a sequence with truth/ masks",
+                                          path=ctx.sequence.root if ctx.sequence is not None else None)
+            mask = ctx.truth.mask(frame.index)
+        else:
+            mask = self.segmenter.segment(frame.rgb).dynamic_mask()
         inputs.potentially_dynamic = mask
         inputs.info["potentially_dynamic_fraction"] = float(mask.mean())
         return inputs
