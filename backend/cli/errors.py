@@ -27,8 +27,9 @@ def run_with_error_mapping(app: typer.Typer) -> int:
     except Exception as exc:  # click usage errors carry their own exit code
         import click
 
-        if isinstance(exc, click.ClickException):
+        # typer >= 0.29 raises its vendored click's exceptions (`typer._click`); older typer, click's own
+        if isinstance(exc, (click.ClickException, typer.TyperException)) and hasattr(exc, "show"):
             exc.show()
-            return exc.exit_code
+            return getattr(exc, "exit_code", EXIT_BAD_INPUT)
         raise
     return 0

@@ -24,6 +24,8 @@ def train_command(
                                              "file (keys of TrainConfig; optional \"preset\" base).")] = "cpu-tum",
     out: Annotated[Path | None, typer.Option(help="Output folder (checkpoints, metrics.jsonl).")] = None,
     resume: Annotated[bool, typer.Option(help="Continue from OUT/last.pt.")] = False,
+    init: Annotated[Path | None, typer.Option(help="Fine-tune: start from this checkpoint's weights (e.g. the "
+                                                   "msnet.pt of a cpu-tum run for cpu-tum-ft).")] = None,
     epochs: Annotated[int | None, typer.Option(help="Override the number of epochs.")] = None,
     batch_size: Annotated[int | None, typer.Option(help="Override the batch size.")] = None,
     lr: Annotated[float | None, typer.Option(help="Override the peak learning rate.")] = None,
@@ -39,9 +41,11 @@ def train_command(
     from worker.slam.segmentation.train.config import load_train_config
     from worker.slam.segmentation.train.trainer import train
 
+    if config == "cpu-tum-ft" and init is None and not resume:
+        raise typer.BadParameter("cpu-tum-ft continues a cpu-tum run: pass --init RUN/msnet.pt", param_hint="--init")
     cfg = load_train_config(config, out_dir=str(out) if out else None, epochs=epochs, batch_size=batch_size, lr=lr,
                             samples_per_epoch=samples_per_epoch, time_budget_min=time_budget_min,
-                            shared_dir=shared_dir or _shared_default())
+                            init_weights=str(init) if init else None, shared_dir=shared_dir or _shared_default())
     weights = train(cfg, resume=resume, progress=progress)
     if export is not None:
         export.parent.mkdir(parents=True, exist_ok=True)

@@ -76,3 +76,29 @@ def test_train_config_presets_and_files(tmp_path: Path) -> None:
         load_train_config(str(f))
     with pytest.raises(ConfigError):
         load_train_config("no-such-preset")
+
+
+def test_fine_tuning_starts_from_the_given_weights(tmp_path: Path) -> None:
+    _tiny_yolo(tmp_path / "data")
+    base = replace(presets()["smoke"], model=TINY, yolo_dirs=(str(tmp_path / "data"),), backgrounds=(),
+                   holdout_every=3, threads=1)
+    first = train(replace(base, out_dir=str(tmp_path / "a")), progress=False)
+    # lr 0 freezes the weights: what comes out is what went in (fine-tuned) or a new random draw (not)
+    tuned = train(replace(base, out_dir=str(tmp_path / "b"), init_weights=str(first), lr=0.0, seed=5),
+                  progress=False)
+    fresh = train(replace(base, out_dir=str(tmp_path / "c"), lr=0.0, seed=5), progress=False)
+    start = dict(load_model(first)[0].named_parameters())
+    assert all(torch.equal(p, start[k]) for k, p in load_model(tuned)[0].named_parameters())
+    assert not all(torch.equal(p, start[k]) for k, p in load_model(fresh)[0].named_parameters())
+    with pytest.raises(ConfigError, match="architecture"):
+        train(replace(base, out_dir=str(tmp_path / "d"), init_weights=str(first), model=replace(TINY, embed_dim=32)),
+              progress=False)
+
+
+def test_cli_rejects_fine_tuning_without_weights(tmp_path: Path, capsys, monkeypatch) -> None:
+    from backend.cli.errors import run_with_error_mapping
+    from backend.cli.main import app
+
+    monkeypatch.setattr("sys.argv", ["vtdslam", "train-msnet", "--config", "cpu-tum-ft", "--out", str(tmp_path)])
+    assert run_with_error_mapping(app) == 2
+    assert "--init" in capsys.readouterr().err and not any(tmp_path.iterdir())

@@ -16,7 +16,8 @@ from tqdm import tqdm
 
 from worker.slam.io.images import read_rgb
 from worker.slam.segmentation.evaluate import confusion, metrics_from_confusion
-from worker.slam.segmentation.msnet.checkpoint import save_model
+from worker.slam.errors import ConfigError
+from worker.slam.segmentation.msnet.checkpoint import load_model, save_model
 from worker.slam.segmentation.msnet.model import MSNet, build_msnet
 from worker.slam.segmentation.msnet.segmenter import pick_device
 from worker.slam.segmentation.train.config import TrainConfig
@@ -117,6 +118,12 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     device = pick_device(cfg.device)
     data = build_training_data(cfg)
     model = build_msnet(cfg.model).to(device)
+    if cfg.init_weights and not (resume and (Path(cfg.out_dir) / "last.pt").is_file()):
+        start, _ = load_model(cfg.path(cfg.init_weights))
+        if start.cfg != cfg.model:
+            raise ConfigError(f"init_weights {cfg.init_weights}: its architecture differs from the config's model")
+        model.load_state_dict(start.state_dict())
+        model.train()
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = max(cfg.samples_per_epoch // cfg.batch_size, 1)
     total_steps = steps_per_epoch * cfg.epochs
