@@ -5,6 +5,7 @@ import csv
 import json
 import shutil
 
+import numpy as np
 import pytest
 
 from worker.slam.config import get_preset
@@ -83,3 +84,19 @@ def test_static_object_of_dynamic_class_is_kept(dyn_seq, tmp_path):
     removed = res.metrics["stage_info"]["features_removed"]
     kept = res.metrics["stage_info"]["features_kept"]
     assert removed < 0.05 * kept
+
+
+def test_culling_gives_band_keypoints_back_rather_than_starve_the_tracker():
+    from worker.slam.camera import parse_camera
+
+    stage = CullingStage(get_preset("no-restoration", {"culling": {"min_kept_features": 5}}), parse_camera("tum3"))
+    dynamic = np.zeros((10, 10), bool)
+    dynamic[:5, :5] = True
+    uv = np.array([[1, 1], [2, 2], [3, 3], [6, 1], [6, 2], [6, 3], [6, 4], [9, 9], [8, 9]], float)  # (x, y)
+    removed = np.array([True] * 7 + [False] * 2)  # 3 on the object, 4 in its band, 2 elsewhere
+    info = {}
+    out = stage._readmit(removed, uv, dynamic, info)
+    assert (~out).sum() == 5 and out[:3].all() and info["features_readmitted"] == 3
+    assert stage.summary()["features_readmitted"] == 3
+    stage.cfg.min_kept_features = 0
+    assert np.array_equal(stage._readmit(removed, uv, dynamic, {}), removed)

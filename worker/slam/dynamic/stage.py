@@ -47,6 +47,10 @@ class CullingStageConfig:
     """Compare with the frame this many frames back (the previous one at the start). Slow movers are the hard
     case: on the augmented-real sequence people move a median 1.3 px between consecutive frames (static points:
     0.6 px), 6.3 px over 10 frames (static: 1.0 px), so a longer baseline separates them."""
+    min_kept_features: int = 150
+    """When culling would leave the tracker fewer features than this, keypoints in the exclusion band (near,
+    not on, dynamic objects) are given back in the extractor's order, so that tracking is not starved by
+    a segmentation that covers half the frame. Counted per frame (`features_readmitted`). 0 = off."""
 
 
 @dataclass
@@ -88,7 +92,7 @@ class CullingStage:
         self.camera = camera
         self.history: deque[_PastFrame] = deque(maxlen=max(1, self.cfg.lag_frames))
         self.scores: TruthScores | None = None
-        self.removed_total = self.kept_total = 0
+        self.removed_total = self.kept_total = self.readmitted_total = 0
         self.compared = self.guided = 0
         # Wall time of cull_frame alone (the stage also extracts the frame's ORB, which tracking needs anyway).
         # Not process CPU time: OpenCV's worker threads spin on an idle core and would inflate it.
@@ -120,6 +124,7 @@ class CullingStage:
                              prev_depth, self.camera.K, T_cur_prev)
             self.decision_ms.append(1000 * (time.perf_counter() - t0))
             removed = res.removed(feats.uv)
+            removed = self._readmit(removed, feats.uv, res.dynamic_mask, inputs.info)
             self.compared += 1
             self.guided += res.guided
             self.last = res
@@ -148,8 +153,23 @@ class CullingStage:
         self.history.append(_PastFrame(frame.index, feats, frame.depth))
         return inputs
 
+    def _readmit(self, removed: np.ndarray, uv: np.ndarray, dynamic: np.ndarray, info: dict) -> np.ndarray:
+        """`removed` (N,) with band keypoints (removed, not on `dynamic` (H, W)) given back up to the minimum."""
+        short = self.cfg.min_kept_features - int((~removed).sum())
+        if short <= 0:
+            return removed
+        h, w = dynamic.shape
+        on = dynamic[np.clip(np.rint(uv[:, 1]).astype(int), 0, h - 1), np.clip(np.rint(uv[:, 0]).astype(int), 0, w - 1)]
+        band = np.flatnonzero(removed & ~on)[:short]
+        removed = removed.copy()
+        removed[band] = False
+        info["features_readmitted"] = len(band)
+        self.readmitted_total += len(band)
+        return removed
+
     def summary(self) -> dict:
         out = {"features_removed": self.removed_total, "features_kept": self.kept_total,
+               "features_readmitted": self.readmitted_total,
                "frames_compared": self.compared, "guided_matching_frames": self.guided,
                "decision_ms_median": float(np.median(self.decision_ms)) if self.decision_ms else None}
         if self.scores is not None:
