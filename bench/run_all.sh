@@ -14,6 +14,12 @@ echo "## SLAM core (7-Scenes redkitchen, 1000 frames)"; $PY bench/bench_slam.py
 echo "## dynamic presets"
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --sequence "$BENCH_DIR/synth:tum3" \
     --sequence "$SHARED/data/7scenes_redkitchen:7scenes" --max-frames 300
+echo "## no-restoration with the true masks as segmentation and a 15 px band (separates culling's errors from MSNET's)"
+$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --sequence "$BENCH_DIR/synth:tum3" \
+    --presets no-restoration --max-frames 300 \
+    --config '{"segmentation": {"source": "truth"}, "culling": {"culling": {"dilation_px": 15}}}'
+echo "## the augmented sequence in full (1000 frames)"
+$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets orb-only,no-restoration --max-frames 1000
 echo "## culling cost"; $PY bench/bench_culling.py "$BENCH_DIR/aug" --camera 7scenes --frames 60
 echo "## restoration"; $PY bench/bench_inpainting.py "$BENCH_DIR/synth" "$BENCH_DIR/aug" --frames 15 --camera 7scenes --speed
 echo "## MSNET"; $PY bench/bench_msnet.py --threads 1
