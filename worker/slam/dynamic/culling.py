@@ -92,9 +92,9 @@ class CullingConfig:
     """The exclude mask is the dynamic mask dilated by this many pixels (a keypoint on the silhouette describes a
     patch that moves with the object). With true masks a band of half the ORB patch is best (augmented sequence,
     300 frames: ATE 0.049 / 0.033 / 0.025 / 0.023 m for 1 / 3 / 8 / 16 px; people-free 0.023), but MSNET's masks
-    already spill past people, and a wider band only starves tracking: with them, 3 / 8 / 15 px gave ATE
-    0.040 / 0.049 / 0.041 m on 300 frames, 0.048 / 0.048 / 0.061 m on 1000, and +3 / +0.4 / +6 % over
-    `orb-only` on static 7-Scenes. Use 15 with a precise segmenter."""
+    already spill past people, and a wider band starves tracking: with them, 3 / 8 / 15 px gave ATE
+    0.045 / 0.044 / 0.050 m on 300 frames, 0.046 / 0.050 / 0.153 m on all 1000 (15 px: 111 frames lost), and
+    +3 / +0.4 / +6 % over `orb-only` on static 7-Scenes. Use 15 with a precise segmenter."""
     cluster_dilation_px: int = 3
     """The same for the geometric clusters, whose regions are already whole grid cells wide (a wider band
     there removed static features: geometry-only ATE +14 % on static 7-Scenes)."""
