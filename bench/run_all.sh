@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Every benchmark table of the README's Results section, in one go (about 40 min on 2 cores).
+# Every benchmark table of the README's Results section, in one go (about 55 min on 2 cores).
 # Needs ../shared (or VTD_SHARED_DIR). Generated sequences go to $BENCH_DIR (default: a temp folder).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -8,6 +8,7 @@ SHARED="${VTD_SHARED_DIR:-$(cd .. && pwd)/shared}"
 BENCH_DIR="${BENCH_DIR:-$(mktemp -d)}"
 echo "## generated sequences in $BENCH_DIR"
 .venv/bin/vtdslam synth "$BENCH_DIR/synth" --frames 200 --people 2 > /dev/null
+.venv/bin/vtdslam synth "$BENCH_DIR/synth0" --frames 200 --people 0 > /dev/null  # the same room, people-free
 .venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
     "$BENCH_DIR/aug" > /dev/null
 echo "## SLAM core (7-Scenes redkitchen, 1000 frames)"; $PY bench/bench_slam.py
@@ -18,8 +19,22 @@ echo "## no-restoration with the true masks as segmentation and a 15 px band (se
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --sequence "$BENCH_DIR/synth:tum3" \
     --presets no-restoration --max-frames 300 \
     --config '{"segmentation": {"source": "truth"}, "culling": {"culling": {"dilation_px": 15}}}'
+$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth:tum3" --presets no-restoration --max-frames 300 \
+    --config '{"segmentation": {"source": "truth"}}'
+echo "## the synthetic room without people"
+$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth0:tum3" --presets orb-only,no-restoration --max-frames 300
 echo "## the augmented sequence in full (1000 frames)"
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets orb-only,no-restoration --max-frames 1000
+$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-restoration --max-frames 1000 \
+    --config '{"segmentation": {"source": "truth"}, "culling": {"culling": {"dilation_px": 15}}}'
+echo "## exclusion band 8 and 15 px with MSNET (the 3 px default is in the tables above)"
+for px in 8 15; do
+    $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --sequence "$BENCH_DIR/synth:tum3" \
+        --sequence "$SHARED/data/7scenes_redkitchen:7scenes" --presets no-restoration --max-frames 300 \
+        --config "{\"culling\": {\"culling\": {\"dilation_px\": $px}}}"
+    $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-restoration --max-frames 1000 \
+        --config "{\"culling\": {\"culling\": {\"dilation_px\": $px}}}"
+done
 echo "## culling cost"; $PY bench/bench_culling.py "$BENCH_DIR/aug" --camera 7scenes --frames 60
 echo "## restoration"; $PY bench/bench_inpainting.py "$BENCH_DIR/synth" "$BENCH_DIR/aug" --frames 15 --camera 7scenes --speed
 echo "## MSNET"; $PY bench/bench_msnet.py --threads 1
