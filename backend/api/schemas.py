@@ -119,7 +119,8 @@ class JobOut(BaseModel):
     started_at: datetime | None
     finished_at: datetime | None
     worker: str | None
-    attempts: int
+    attempts: int = Field(description="How many times the job was queued: 1 + manual retries + automatic requeues.")
+    requeues: int = Field(description="Automatic requeues after its worker died (reset by a manual retry).")
     cancel_requested: bool
     metrics: dict[str, Any] | None = Field(description="The run's metrics.json once it succeeded.")
 
@@ -145,6 +146,7 @@ class JobOut(BaseModel):
                     "finished_at": None,
                     "worker": "host-1",
                     "attempts": 1,
+                    "requeues": 0,
                     "cancel_requested": False,
                     "metrics": None,
                 }
@@ -173,6 +175,7 @@ class JobOut(BaseModel):
             finished_at=job.finished_at,
             worker=job.worker,
             attempts=job.attempts,
+            requeues=job.requeues,
             cancel_requested=job.cancel_requested,
             metrics=job.metrics.metrics if job.metrics is not None else None,
         )

@@ -95,7 +95,7 @@ def test_worker_killed_mid_job_is_reaped_on_restart_and_the_queue_goes_on(settin
         assert client.post(f"/api/v1/jobs/{victim}/retry").status_code == 200
         done = wait_for("the retried job", lambda: (x := job(client, victim))["status"] in FINAL and x,
                         timeout=120, context=procs.tails)
-        assert done["status"] == "succeeded" and done["attempts"] == 2, done
+        assert done["status"] == "succeeded" and (done["attempts"], done["requeues"]) == (2, 0), done
         assert procs.stop(second) == 0
 
 
@@ -118,7 +118,7 @@ def test_stale_job_is_requeued_once_then_failed(settings, procs, tmp_path):
         again = wait_for("the requeued job to run on crash-b",
                          lambda: (j := job(client, victim))["worker"] == "crash-b" and j["frames_done"] > 0 and j,
                          timeout=90, context=procs.tails)
-        assert again["attempts"] == 2 and again["status"] == "running", again
+        assert (again["attempts"], again["requeues"], again["status"]) == (2, 1, "running"), again
         assert healthy(client)
         procs.kill9(second)
 
@@ -127,7 +127,7 @@ def test_stale_job_is_requeued_once_then_failed(settings, procs, tmp_path):
         failed = wait_for("the job to fail after its second death",
                           lambda: (j := job(client, victim))["status"] in FINAL and j, context=procs.tails)
         assert failed["status"] == "failed" and "stopped reporting" in failed["error"], failed
-        assert failed["attempts"] == 2  # requeued once, not twice
+        assert (failed["attempts"], failed["requeues"]) == (2, 1)  # requeued once, not twice
         assert not (settings.data_dir / "artifacts" / victim).exists()
         assert not list((settings.data_dir / "staging").glob(f"job-{victim}-*"))
         done = wait_for("the job behind it", lambda: (x := job(client, behind))["status"] in FINAL and x,
