@@ -126,12 +126,14 @@ class CullingResult:
 
     def removed(self, keypoints_xy: np.ndarray) -> np.ndarray:
         """bool (M,): which of the current frame's keypoints (M, 2) fall in the excluded region."""
-        if len(keypoints_xy) == 0:
-            return np.zeros(0, bool)
-        h, w = self.exclude_mask.shape
-        x = np.clip(np.round(keypoints_xy[:, 0]).astype(int), 0, w - 1)
-        y = np.clip(np.round(keypoints_xy[:, 1]).astype(int), 0, h - 1)
-        return self.exclude_mask[y, x]
+        return mask_at(self.exclude_mask, keypoints_xy)
+
+
+def mask_at(mask: np.ndarray, keypoints_xy: np.ndarray) -> np.ndarray:
+    """bool (M,): `mask` (H, W) at the nearest pixel of each keypoint (M, 2) (x, y), clipped to the image."""
+    h, w = mask.shape
+    return mask[_pixel(keypoints_xy[:, 1], h), _pixel(keypoints_xy[:, 0], w)] if len(keypoints_xy) \
+        else np.zeros(0, bool)
 
 
 def _relative_pose(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndarray | None,

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from worker.slam.camera import Camera
-from worker.slam.dynamic.culling import CullingConfig, cull_frame
+from worker.slam.dynamic.culling import CullingConfig, cull_frame, mask_at
 from worker.slam.errors import SequenceFormatError
 from worker.slam.features.types import Features
 from worker.slam.io.sequence import Frame
@@ -145,9 +145,7 @@ class CullingStage:
             k = 2 * self.cfg.culling.dilation_px + 1
             inputs.exclude_mask = cv2.dilate(inputs.potentially_dynamic.astype(np.uint8), np.ones((k, k))) > 0
             inputs.dynamic_mask = inputs.potentially_dynamic
-            h, w = frame.depth.shape
-            removed = inputs.exclude_mask[np.clip(np.rint(feats.uv[:, 1]).astype(int), 0, h - 1),
-                                          np.clip(np.rint(feats.uv[:, 0]).astype(int), 0, w - 1)]
+            removed = mask_at(inputs.exclude_mask, feats.uv)
         inputs.features = feats.select(~removed)
         inputs.info.update(features_removed=int(removed.sum()), features_kept=int((~removed).sum()))
         self.removed_total += int(removed.sum())
@@ -160,9 +158,7 @@ class CullingStage:
         short = self.cfg.min_kept_features - int((~removed).sum())
         if short <= 0:
             return removed
-        h, w = dynamic.shape
-        on = dynamic[np.clip(np.rint(uv[:, 1]).astype(int), 0, h - 1), np.clip(np.rint(uv[:, 0]).astype(int), 0, w - 1)]
-        band = np.flatnonzero(removed & ~on)[:short]
+        band = np.flatnonzero(removed & ~mask_at(dynamic, uv))[:short]
         removed = removed.copy()
         removed[band] = False
         info["features_readmitted"] = len(band)
