@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
-# Every benchmark table of the README's Results section, in one go (about 55 min on 2 cores).
+# Every benchmark table of the README's Results section, in one go (not timed end to end).
 # Needs ../shared (or VTD_SHARED_DIR). Generated sequences go to $BENCH_DIR (default: a temp folder).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=.venv/bin/python
 SHARED="${VTD_SHARED_DIR:-$(cd .. && pwd)/shared}"
 BENCH_DIR="${BENCH_DIR:-$(mktemp -d)}"
+ORACLE15='{"segmentation": {"source": "truth"}, "culling": {"culling": {"dilation_px": 15}}}'  # true masks, 15 px band
 echo "## generated sequences in $BENCH_DIR"
 .venv/bin/vtdslam synth "$BENCH_DIR/synth" --frames 200 --people 2 > /dev/null
 .venv/bin/vtdslam synth "$BENCH_DIR/synth0" --frames 200 --people 0 > /dev/null  # the same room, people-free
@@ -18,7 +19,7 @@ $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --sequence "$BENC
 echo "## no-restoration with the true masks as segmentation and a 15 px band (separates culling's errors from MSNET's)"
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --sequence "$BENCH_DIR/synth:tum3" \
     --presets no-restoration --max-frames 300 \
-    --config '{"segmentation": {"source": "truth"}, "culling": {"culling": {"dilation_px": 15}}}'
+    --config "$ORACLE15"
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth:tum3" --presets no-restoration --max-frames 300 \
     --config '{"segmentation": {"source": "truth"}}'
 echo "## the synthetic room without people"
@@ -26,7 +27,7 @@ $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth0:tum3" --presets orb-onl
 echo "## the augmented sequence in full (1000 frames)"
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets orb-only,no-restoration --max-frames 1000
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-restoration --max-frames 1000 \
-    --config '{"segmentation": {"source": "truth"}, "culling": {"culling": {"dilation_px": 15}}}'
+    --config "$ORACLE15"
 echo "## exclusion band 8 and 15 px with MSNET (the 3 px default is in the tables above)"
 for px in 8 15; do
     $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --sequence "$BENCH_DIR/synth:tum3" \
