@@ -173,6 +173,25 @@ def test_growth_completes_an_object_along_its_surface_and_stops_at_depth_edges()
     assert np.array_equal(grow_by_depth(seen, depth, grow_px=0), seen)
 
 
+def test_growth_completes_a_half_segmented_moving_object_in_cull_frame():
+    """Segmentation covering only the upper half of the moving board (a person's legs missed): growth along the
+    board's surface gives culling the rest of it, and stops at the depth edge to the wall."""
+    (rgb0, d0, _), (rgb1, d1, m1) = two_frames(0.06)
+    kp0, ds0 = orb(rgb0)
+    kp1, ds1 = orb(rgb1)
+    rows = np.flatnonzero(m1.any(1))
+    half = m1.copy()
+    half[(rows[0] + rows[-1]) // 2:] = False
+
+    def cull(grow_px):
+        res = cull_frame(kp0, ds0, kp1, ds1, d1, half, COV, CullingConfig(grow_px=grow_px), d0, K)
+        return precision_recall(res.removed(kp1), kp1, m1)
+
+    p0, r0 = cull(0)
+    p1, r1 = cull(200)
+    assert r0 < 0.6 and r1 >= 0.95 and p1 >= 0.95
+
+
 def test_exclusion_band_matches_a_full_image_dilation():
     from worker.slam.dynamic.culling import _dilate
 
