@@ -1,11 +1,15 @@
 """The paper's ablation on dynamic sequences: presets side by side, with the truth-based scores of each stage.
 
     .venv/bin/python bench/bench_dynamic.py --sequence DIR:CAMERA [--sequence ...] [--presets a,b] \
-        [--max-frames N] [--config JSON]
+        [--max-frames N] [--config JSON] [--summary]
 
 For each sequence × preset: ATE/RPE, frames tracked, static features used per frame, features removed,
 dynamic-feature precision/recall and mask IoU (when the sequence has `truth/`), restoration PSNR and depth
 error, ms per frame of culling and restoration, and end-to-end fps. Benchmarks print figures; they assert nothing.
+
+`--summary` adds each preset's mean, min and max over the sequences: give it several sequences of one kind
+(`vtdslam augment --seed 1`, `--seed 2`, ...). One 300-frame run's ATE swings by tens of percent with small
+changes (which features happen to survive), so presets and settings are compared on such means.
 """
 from __future__ import annotations
 
@@ -56,16 +60,19 @@ def main() -> None:
     ap.add_argument("--presets", default="orb-only,geometry-only,no-restoration,full")
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--config", default=None, help="JSON overrides applied to every preset")
+    ap.add_argument("--summary", action="store_true", help="also print each preset's mean over the sequences")
     args = ap.parse_args()
     overrides = json.loads(args.config) if args.config else None
     print("| sequence | preset | frames | tracked | ATE rmse (m) | RPE t (m/s) | RPE r (°/s) | static feats/frame "
           "| removed/frame | restored feats/frame | dyn. precision | dyn. recall | mask IoU | restore PSNR (dB) "
           "| restore depth err (cm) | seg ms | cull ms (with ORB) | cull decision ms | guided frames | restore ms | fps |")
     print("|" + "---|" * 21)
+    rows = []
     for spec in args.sequence:
         seq_dir, _, camera = spec.rpartition(":")
         for preset in args.presets.split(","):
             r = row(seq_dir, camera, preset, args.max_frames, overrides)
+            rows.append(r)
             print(f"| {r['sequence']} | {preset} | {r['frames']} | {r['tracked']} | {_fmt(r['ate'], 4)} | "
                   f"{_fmt(r['rpe_t'], 4)} | {_fmt(r['rpe_r'], 2)} | {_fmt(r['kept'], 0)} | {_fmt(r['removed'], 1)} | "
                   f"{_fmt(r['restored_feats'], 1)} | {_fmt(r['precision'], 2)} | {_fmt(r['recall'], 2)} | "
@@ -73,6 +80,28 @@ def main() -> None:
                   f"{_fmt(r['seg_ms'], 1)} | {_fmt(r['cull_ms'], 1)} | {_fmt(r['decision_ms'], 1)} | {r['guided']} | "
                   f"{_fmt(r['rest_ms'], 1)} | {_fmt(r['fps'], 1)} |",
                   flush=True)
+    if args.summary:
+        print_summary(rows)
+
+
+def print_summary(rows: list[dict]) -> None:
+    """Per preset over the sequences: ATE mean (min–max), frames tracked, dynamic precision/recall means."""
+    print()
+    print("| preset | sequences | ATE mean (m) | ATE min–max (m) | tracked | dyn. precision | dyn. recall |")
+    print("|---|---|---|---|---|---|---|")
+    for preset in dict.fromkeys(r["preset"] for r in rows):
+        rs = [r for r in rows if r["preset"] == preset]
+        ate = [r["ate"] for r in rs if r["ate"] is not None]
+        mean = lambda k: _mean([r[k] for r in rs])  # noqa: E731
+        spread = f"{min(ate):.4f}–{max(ate):.4f}" if ate else "–"
+        print(f"| {preset} | {len(rs)} | {_fmt(_mean(ate), 4)} | {spread} | "
+              f"{sum(r['tracked'] for r in rs)}/{sum(r['frames'] for r in rs)} | {_fmt(mean('precision'), 2)} | "
+              f"{_fmt(mean('recall'), 2)} |")
+
+
+def _mean(values: list) -> float | None:
+    values = [v for v in values if v is not None]
+    return sum(values) / len(values) if values else None
 
 
 if __name__ == "__main__":

@@ -22,6 +22,15 @@ $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --sequence "$BENC
     --config "$ORACLE15"
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth:tum3" --presets no-restoration --max-frames 300 \
     --config '{"segmentation": {"source": "truth"}}'
+echo "## five augmented sequences (seeds 0-4, first 300 frames): means and spread over people placements"
+SEEDS=(--sequence "$BENCH_DIR/aug:7scenes")
+for seed in 1 2 3 4; do
+    .venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
+        "$BENCH_DIR/aug_s$seed" --frames 300 --seed "$seed" > /dev/null
+    SEEDS+=(--sequence "$BENCH_DIR/aug_s$seed:7scenes")
+done
+$PY bench/bench_dynamic.py "${SEEDS[@]}" --presets orb-only,no-restoration --max-frames 300 --summary
+$PY bench/bench_dynamic.py "${SEEDS[@]}" --presets no-restoration --max-frames 300 --summary --config "$ORACLE15"
 echo "## the synthetic room without people"
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth0:tum3" --presets orb-only,no-restoration --max-frames 300
 echo "## the augmented sequence in full (1000 frames)"
