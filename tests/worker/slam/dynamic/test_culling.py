@@ -85,6 +85,30 @@ def test_a_segment_spilling_onto_the_static_scene_is_culled_only_where_it_moves(
     assert recall >= 0.9 and wall_removed > 0.9
 
 
+def test_prediction_veto_keeps_the_static_scene_when_a_missed_mover_is_all_that_is_left_outside():
+    """Segmentation marks the whole wall and misses the moving board: F and the pose are then fitted on the
+    board, and the static wall looks moving against them. With the tracker's predicted pose as a second
+    opinion (a point must move against both), the wall keeps its features."""
+    (rgb0, d0, _), (rgb1, d1, m1) = two_frames(0.06)
+    kp0, ds0 = orb(rgb0)
+    kp1, ds1 = orb(rgb1)
+    T_cur_prev = pose(0.001, 0.0, 0.05) @ np.linalg.inv(pose(0.02, 0.005, 0.5)) @ pose(0.0)  # 1 mm, 0.05 deg off
+    wall = ~m1[np.round(kp1[:, 1]).astype(int).clip(0, m1.shape[0] - 1),
+               np.round(kp1[:, 0]).astype(int).clip(0, m1.shape[1] - 1)]
+
+    marked = ~m1
+    marked[:, :24] = False  # a thin strip of wall is left outside: too few points to outvote the board
+
+    def wall_removed(veto):
+        res = cull_frame(kp0, ds0, kp1, ds1, d1, marked, COV,
+                         CullingConfig(prediction_veto=veto, guided_min_matches=10), d0, K, T_cur_prev)
+        assert res.guided
+        return res.removed(kp1)[wall & (kp1[:, 0] >= 30)].mean()
+
+    assert wall_removed(False) > 0.5
+    assert wall_removed(True) < 0.1
+
+
 def test_still_object_of_dynamic_class_keeps_features():
     res, kp, _ = run(0.0)
     assert not any(s.dynamic for s in res.segments if s.kind == "semantic")
