@@ -68,7 +68,7 @@ class CullingConfig:
     augmented seeds 0-7, 300 frames, ATE without -> with (m): 0.045 -> 0.034, 0.036 -> 0.031, 0.050 -> 0.046,
     0.247 (97 frames tracked) -> 0.043 (291), 0.025 -> 0.026, 0.037 -> 0.048, 0.036 -> 0.034, 0.228 (151) ->
     0.064 (284); all 1000 frames of seed 0: 0.046 -> 0.039; 90 frames (the real-data test): 0.0085 -> 0.067
-    (one window where a missed person carries a quarter of the kept features); static 7-Scenes and the
+    (one window where a missed person carries a third of the kept features); static 7-Scenes and the
     synthetic room unchanged."""
     min_points: int = 3
     """A segment needs this many matched points to be judged by geometry."""
@@ -186,21 +186,19 @@ def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None) -> np.nda
     score = epipolar_distance(F, p_prev, p_cur)
     if config.use_depth and prev_depth is not None and K is not None:
         h, w = prev_depth.shape
-        xi = np.clip(np.round(p_prev[:, 0]).astype(int), 0, w - 1)
-        yi = np.clip(np.round(p_prev[:, 1]).astype(int), 0, h - 1)
-        z = prev_depth[yi, xi]
+        z = prev_depth[_pixel(p_prev[:, 1], h), _pixel(p_prev[:, 0], w)]
         has = z > 0
         usable = _spread(np.flatnonzero(has & static), config.fit_max_points)
-        X = np.stack([(p_prev[:, 0] - K[0, 2]) / K[0, 0] * z, (p_prev[:, 1] - K[1, 2]) / K[1, 1] * z, z], 1)
         if len(usable) >= 6:
+            X = np.stack([(p_prev[:, 0] - K[0, 2]) / K[0, 0] * z, (p_prev[:, 1] - K[1, 2]) / K[1, 1] * z, z], 1)
             pose = _relative_pose(X[usable], p_cur[usable].astype(np.float64), K, T_init, config)
             if pose is not None:
                 proj, _ = cv2.projectPoints(X[has], *pose, K, None)
                 err = np.linalg.norm(proj.reshape(-1, 2) - p_cur[has], axis=1)
                 score[has] = np.maximum(score[has], err / config.reprojection_scale)
         if config.prediction_veto and T_init is not None and has.any():
-            proj, _ = cv2.projectPoints(X[has], cv2.Rodrigues(T_init[:3, :3])[0], T_init[:3, 3], K, None)
-            score[has] = np.minimum(score[has], np.linalg.norm(proj.reshape(-1, 2) - p_cur[has], axis=1))
+            pred = predict_positions(p_prev[has], z[has], T_init, K)
+            score[has] = np.fmin(score[has], np.linalg.norm(pred - p_cur[has], axis=1))  # NaN (behind) = no veto
     return score
 
 
