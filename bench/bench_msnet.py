@@ -1,19 +1,24 @@
 """MSNET against the TFLite teachers: accuracy on real frames and CPU latency at 640x480, as a markdown table.
 
     .venv/bin/python bench/bench_msnet.py [--threads 1] [--repeats 3] [--checkpoint PT] [--overlays /tmp/msnet_overlays]
+        [--sequence AUG_DIR ...] [--every 10] [--frames 300]
 
 Columns: person IoU on the TUM fr3 walking_xyz frame (reference mask in ../shared); person IoU and mIoU on the
 held-out COCO128 split (every 5th image, never trained on); person agreement (IoU of the two person masks,
 pooled over frames) with the DeepLabV3-257 teacher on the 10 fr3 walking_halfsphere frames (the `cpu-tum` recipe
 trains on these frames with this teacher's labels, so for its checkpoint this column is a training-set figure,
-not a held-out one; walking_xyz and the COCO held-out split are never trained on); median latency of
-`segment()` on 640x480 frames (resize in, full-resolution labels and probabilities out). Teachers missing from
-../shared/models are skipped. Timings on a shared machine vary with its load: the load average is printed.
+not a held-out one; walking_xyz and the COCO held-out split are never trained on); with `--sequence`
+(generated sequences with truth), the pooled IoU, precision and recall of the potentially dynamic mask against
+the true masks on every n-th frame; median latency of `segment()` on 640x480 frames (resize in, full-resolution labels and probabilities out). MSNET runs twice: as
+shipped (bilinear upsampling of its probabilities) and with the optional guided upsampling (`guided_radius` 13).
+Teachers missing from ../shared/models are skipped. Timings on a shared machine vary with its load: the load
+average is printed.
 """
 from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -36,6 +41,14 @@ def pooled_iou(pairs) -> float:
     return float(inter / union) if union else float("nan")
 
 
+def precision_recall(pairs) -> tuple[float, float]:
+    """Pooled pixel precision and recall of predicted masks against true ones, over (pred, truth) pairs."""
+    import numpy as np
+
+    inter = sum(int(np.logical_and(a, b).sum()) for a, b in pairs)
+    return inter / max(sum(int(a.sum()) for a, _ in pairs), 1), inter / max(sum(int(b.sum()) for _, b in pairs), 1)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shared", type=Path, default=Path(os.environ.get("VTD_SHARED_DIR", "../shared")))
@@ -43,18 +56,25 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--overlays", type=Path, default=None, help="write overlay PNGs here")
+    ap.add_argument("--sequence", type=Path, action="append", default=[],
+                    help="a sequence with truth masks (`vtdslam augment` / `synth` output); repeatable")
+    ap.add_argument("--every", type=int, default=10, help="use every n-th frame of the first --frames")
+    ap.add_argument("--frames", type=int, default=300)
     args = ap.parse_args()
 
     import cv2
     import numpy as np
     import torch
 
+    from worker.slam.camera import parse_camera
     from worker.slam.io.images import read_rgb
+    from worker.slam.io.sequence import Sequence
     from worker.slam.segmentation import SegmenterConfig, make_segmenter
     from worker.slam.segmentation.msnet.checkpoint import load_model
     from worker.slam.segmentation.evaluate import evaluate_segmenter, labelled_samples, measure_latency, overlay, \
         tum_person_mask
     from worker.slam.segmentation.train.datasets import load_yolo_seg, split_holdout
+    from worker.slam.truth import load_truth
 
     torch.set_num_threads(args.threads)
     cv2.setNumThreads(args.threads)
@@ -65,9 +85,19 @@ def main() -> None:
     half = [read_rgb(p) for p in sorted((data / "tum_frames" / "fr3_walking_halfsphere").glob("*.png"))]
     held = split_holdout(load_yolo_seg(data / "coco128_seg", {0: "person", 56: "chair"}), 5)[1]
     classes = ("background", "person", "chair")
+    truth_frames = []  # (rgb, true dynamic mask) of every n-th frame of the given sequences
+    for root in args.sequence:
+        seq, truth = Sequence(root, parse_camera("7scenes")), load_truth(root)
+        if truth is None:
+            ap.error(f"{root} has no truth/ folder")
+        truth_frames += [(seq[i].rgb, truth.mask(i)) for i in range(0, min(args.frames, len(seq)), args.every)]
 
-    segmenters = {"MSNET (ours)": make_segmenter(SegmenterConfig(
-        checkpoint=str(args.checkpoint) if args.checkpoint else None, device="cpu", threads=args.threads))}
+    ckpt = str(args.checkpoint) if args.checkpoint else None
+    segmenters = {
+        "MSNET (ours)": make_segmenter(SegmenterConfig(checkpoint=ckpt, device="cpu", threads=args.threads)),
+        "MSNET + guided upsampling (option)": make_segmenter(SegmenterConfig(
+            checkpoint=ckpt, device="cpu", threads=args.threads, guided_radius=13)),
+    }
     for name, file in TEACHERS.items():
         if (args.shared / "models" / file).is_file():
             segmenters[name] = make_segmenter(SegmenterConfig(
@@ -84,10 +114,12 @@ def main() -> None:
         agree = pooled_iou(zip((r.class_mask("person") for r in half_res), teacher_half)) if teacher_half else None
         lat = measure_latency(seg, half + [xyz_rgb], repeats=args.repeats)
         miou = np.mean([v for k, v in m.iou.items() if v is not None and k in seg.classes])
-        rows.append((name, iou_xyz, m.iou["person"], miou, agree, lat))
+        pairs = [(seg.segment(rgb).dynamic_mask(), gt) for rgb, gt in truth_frames]
+        aug = (pooled_iou(pairs), *precision_recall(pairs)) if pairs else None
+        rows.append((name, iou_xyz, m.iou["person"], miou, agree, aug, lat))
         if args.overlays:
             args.overlays.mkdir(parents=True, exist_ok=True)
-            tag = name.split("(")[0].strip().lower().replace(" ", "_")
+            tag = re.sub(r"\W+", "_", name.split("(")[0].strip().lower())
             for i, (rgb, res) in enumerate([(xyz_rgb, r_xyz), (half[0], half_res[0]), (half[9], half_res[9])]):
                 out = overlay(rgb, res.labels, res.classes)
                 cv2.imwrite(str(args.overlays / f"{i}_{tag}.png"), cv2.cvtColor(out, cv2.COLOR_RGB2BGR))
@@ -100,11 +132,18 @@ def main() -> None:
         print(f"MSNET was trained on {', '.join(targets)} with teacher labels: its halfsphere agreement is a "
               "TRAINING-set figure, not a held-out one.")
     print()
+    if truth_frames:
+        print(f"Sequences with truth: {len(truth_frames)} frames (every {args.every}th of the first {args.frames} of "
+              f"{', '.join(p.name for p in args.sequence)}); IoU / precision / recall of the potentially dynamic "
+              "mask (person and chair) against the true moving-people masks, pooled over frames.")
+    print()
     print("| model | person IoU walking_xyz | person IoU COCO held-out | mIoU COCO held-out | "
-          "person agreement w/ teacher (halfsphere) | latency 640x480 (ms/frame) |")
-    print("|---|---|---|---|---|---|")
-    for name, a, b, c, d, e in rows:
-        print(f"| {name} | {f(a)} | {f(b)} | {f(c)} | {f(d)} | {e:.1f} |")
+          "person agreement w/ teacher (halfsphere) | dynamic mask IoU (P / R), sequences | "
+          "latency 640x480 (ms/frame) |")
+    print("|---|---|---|---|---|---|---|")
+    for name, a, b, c, d, g, e in rows:
+        seqs = f"{g[0]:.3f} ({g[1]:.2f} / {g[2]:.2f})" if g else "–"
+        print(f"| {name} | {f(a)} | {f(b)} | {f(c)} | {f(d)} | {seqs} | {e:.1f} |")
 
 
 if __name__ == "__main__":

@@ -47,6 +47,8 @@ for px in 8 15; do
 done
 echo "## culling cost"; $PY bench/bench_culling.py "$BENCH_DIR/aug" --camera 7scenes --frames 60
 echo "## restoration"; $PY bench/bench_inpainting.py "$BENCH_DIR/synth" "$BENCH_DIR/aug" --frames 15 --camera 7scenes --speed
-echo "## MSNET"; $PY bench/bench_msnet.py --threads 1
+echo "## MSNET"
+$PY bench/bench_msnet.py --threads 1 --sequence "$BENCH_DIR/aug" \
+    $(for seed in 1 2 3 4; do echo --sequence "$BENCH_DIR/aug_s$seed"; done)
 echo "## generators"; $PY bench/bench_generators.py --frames 90
 echo "## upload"; $PY bench/bench_upload.py

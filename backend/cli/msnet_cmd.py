@@ -61,6 +61,8 @@ def eval_command(
     checkpoint: Annotated[Path | None, typer.Option(help="msnet checkpoint (default: shipped).")] = None,
     model_path: Annotated[Path | None, typer.Option(help="tflite-teacher: .tflite model.")] = None,
     threads: Annotated[int, typer.Option(help="CPU threads.")] = 2,
+    guided_radius: Annotated[int, typer.Option(
+        help="msnet: guided-upsampling radius on the network's output grid, e.g. 13; 0 = bilinear.")] = 0,
     as_json: Annotated[bool, typer.Option("--json", help="Print the metrics as JSON.")] = False,
 ) -> None:
     """Per-class IoU and pixel accuracy, mIoU, MPA and latency of a segmenter on a labelled set."""
@@ -70,8 +72,11 @@ def eval_command(
 
     if split not in ("held-out", "all"):
         raise typer.BadParameter("split must be held-out or all")
+    if guided_radius < 0:
+        raise typer.BadParameter("must be >= 0", param_hint="--guided-radius")
     seg = make_segmenter(SegmenterConfig(backend=backend, checkpoint=str(checkpoint) if checkpoint else None,
-                                         model_path=str(model_path) if model_path else None, threads=threads))
+                                         model_path=str(model_path) if model_path else None, threads=threads,
+                                         guided_radius=guided_radius))
     root = data or Path(_shared_default()) / "data" / "coco128_seg"
     classes = ("background", "person", "chair")
     items = load_yolo_seg(root, {0: "person", 56: "chair"})

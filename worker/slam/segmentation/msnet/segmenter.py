@@ -7,6 +7,7 @@ import numpy as np
 import torch
 
 from worker.slam.segmentation.base import SegmentationResult, SegmenterConfig, check_rgb
+from worker.slam.segmentation.guided import guided_upsample
 from worker.slam.segmentation.msnet.checkpoint import load_model
 from worker.slam.segmentation.msnet.model import MSNet
 
@@ -21,13 +22,16 @@ class MsnetSegmenter:
     """Runs a trained MSNET at its configured input size; outputs at the frame's own resolution."""
 
     def __init__(self, model: MSNet, device: torch.device, with_probs: bool = True,
-                 dynamic_classes: tuple[str, ...] | None = None) -> None:
+                 dynamic_classes: tuple[str, ...] | None = None, guided_radius: int = 0,
+                 guided_eps: float = 0.01) -> None:
         # channels-last: the convolutions run ~12 % faster on CPU (oneDNN's native layout), same outputs
         self.model = model.to(device).eval().to(memory_format=torch.channels_last)
         self.device = device
         self.with_probs = with_probs
         self.classes = model.cfg.classes
         self.dynamic_classes = tuple(dynamic_classes) if dynamic_classes is not None else model.cfg.dynamic_classes
+        self.guided_radius = guided_radius
+        self.guided_eps = guided_eps
 
     @classmethod
     def from_config(cls, config: SegmenterConfig) -> MsnetSegmenter:
@@ -35,7 +39,8 @@ class MsnetSegmenter:
             torch.set_num_threads(config.threads)
         device = pick_device(config.device)
         model, _ = load_model(config.checkpoint, device)
-        return cls(model, device, config.with_probs, config.dynamic_classes)
+        return cls(model, device, config.with_probs, config.dynamic_classes, config.guided_radius,
+                   config.guided_eps)
 
     def _logits(self, rgb: np.ndarray) -> torch.Tensor:
         h, w = self.model.cfg.input_size
@@ -54,8 +59,12 @@ class MsnetSegmenter:
         check_rgb(rgb)
         # Probabilities are upsampled with OpenCV on (h, w, K) and the argmax taken over the contiguous last
         # axis: torch's argmax over dim 0 of a (K, H, W) map took 29 ms of a 44 ms frame on one core.
-        probs = cv2.resize(self.predict_probs(rgb), (rgb.shape[1], rgb.shape[0]), interpolation=cv2.INTER_LINEAR)
-        if probs.ndim == 2:  # OpenCV drops a singleton channel axis (a background-only model)
-            probs = probs[..., None]
+        small = self.predict_probs(rgb)
+        if self.guided_radius:
+            probs = guided_upsample(small, rgb, self.guided_radius, self.guided_eps)
+        else:
+            probs = cv2.resize(small, (rgb.shape[1], rgb.shape[0]), interpolation=cv2.INTER_LINEAR)
+            if probs.ndim == 2:  # OpenCV drops a singleton channel axis (a background-only model)
+                probs = probs[..., None]
         labels = probs.argmax(-1).astype(np.uint8)
         return SegmentationResult(labels, self.classes, self.dynamic_classes, probs if self.with_probs else None)
