@@ -223,7 +223,7 @@ def _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores,
         # only towards "static": a few bad matches among a moving object's points must not keep it, but k
         # nearby points that all agree with the static scene are not on it (one-way: a small moving part of a
         # segment judged static is not looked for; k points are a weaker test than the whole segment's)
-        keep = (dist[:, -1] <= config.local_px) & (np.quantile(scores[on][idx], 0.5, axis=1) <= thr)
+        keep = (dist[:, -1] <= config.local_px) & (np.median(scores[on][idx], axis=1) <= thr)
         flag = np.zeros(cell.shape, np.uint8)
         flag[cell] = keep
         grid = cv2.resize(flag, (gx.shape[1] * s, gx.shape[0] * s), interpolation=cv2.INTER_NEAREST)[:h, :w]

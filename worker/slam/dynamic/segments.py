@@ -10,16 +10,13 @@ def depth_edges(depth: np.ndarray, rel_jump: float = 0.05) -> np.ndarray:
     """bool (H, W): pixels where depth jumps by more than `rel_jump` of itself to a 4-neighbour, or is invalid."""
     d = depth.astype(np.float32)
     edges = d <= 0
-    for axis in (0, 1):
-        diff = np.abs(np.diff(d, axis=axis))
-        ref = np.minimum(np.delete(d, -1, axis=axis), np.delete(d, 0, axis=axis))
-        jump = diff > rel_jump * np.maximum(ref, 1e-3)
-        if axis == 0:
-            edges[:-1] |= jump
-            edges[1:] |= jump
-        else:
-            edges[:, :-1] |= jump
-            edges[:, 1:] |= jump
+    # (pixel, next pixel) along each axis as views of `d` and `edges`: no copies of the image
+    pairs = ((np.s_[:-1], np.s_[1:]), (np.s_[:, :-1], np.s_[:, 1:]))
+    for first, second in pairs:
+        a, b = d[first], d[second]
+        jump = np.abs(b - a) > rel_jump * np.maximum(np.minimum(a, b), 1e-3)
+        edges[first] |= jump
+        edges[second] |= jump
     return edges
 
 
