@@ -50,6 +50,11 @@ class CullingConfig:
     falls within this margin of the objects' bounding box (the object's own motion over `lag_frames`)."""
     guided_min_matches: int = 40
     """Fewer guided matches than this (a bad prediction) → brute-force cross-checked matching instead."""
+    confirm_on_objects: bool = True
+    """When too few keypoints outside the segments match the prediction, count the guided matches of all
+    keypoints instead. Segmentation that marks most of the view (MSNET on the synthetic room: 70-80 % in
+    frames 70-92) otherwise leaves the prediction unconfirmed, so the prediction veto is off exactly when F,
+    fitted on the few points left outside, is least reliable; the whole view was then culled and tracking lost."""
     use_depth: bool = True
     """Add the reprojection test with the previous frame's depth."""
     pnp_px: float = 2.0
@@ -181,9 +186,11 @@ def _relative_pose(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndar
 def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None) -> np.ndarray:
     """Motion score (N,) in epipolar pixels; inf-free, 0 where nothing could be measured."""
     F = fundamental_ransac(p_prev[static], p_cur[static], config.ransac_px)
-    if F is None:
+    predicted = config.prediction_veto and T_init is not None and prev_depth is not None and K is not None
+    if F is None and not predicted:
         return np.zeros(len(p_prev))
-    score = epipolar_distance(F, p_prev, p_cur)
+    # Without F (fewer than 8 matches outside the segments) a confirmed prediction alone scores the points.
+    score = epipolar_distance(F, p_prev, p_cur) if F is not None else np.full(len(p_prev), np.inf)
     if config.use_depth and prev_depth is not None and K is not None:
         h, w = prev_depth.shape
         z = prev_depth[_pixel(p_prev[:, 1], h), _pixel(p_prev[:, 0], w)]
@@ -199,6 +206,7 @@ def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None) -> np.nda
         if config.prediction_veto and T_init is not None and has.any():
             pred = predict_positions(p_prev[has], z[has], T_init, K)
             score[has] = np.fmin(score[has], np.linalg.norm(pred - p_cur[has], axis=1))  # NaN (behind) = no veto
+    score[np.isinf(score)] = 0.0  # not measurable
     return score
 
 
@@ -375,13 +383,22 @@ def _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur
     everything is guided first, then what is left on both sides is brute-forced: the moving points a search
     radius misses are exactly what the geometric path looks for."""
     guided = np.flatnonzero(~on_object) if on_object is not None else np.arange(len(kp_cur))
-    if T_cur_prev is not None and K is not None and prev_depth is not None and len(kp_prev) and len(guided):
+    if T_cur_prev is not None and K is not None and prev_depth is not None and len(kp_prev) and len(kp_cur):
         h, w = prev_depth.shape
         z = prev_depth[_pixel(kp_prev[:, 1], h), _pixel(kp_prev[:, 0], w)]
-        g = match_guided(kp_prev.astype(np.float64), z, desc_prev,
-                         KeypointIndex.of_points(kp_cur[guided], desc_cur[guided]), T_cur_prev, K,
-                         config.guided_radius_px, config.match_max_distance)
-        if len(g.prev_idx) >= config.guided_min_matches:
+
+        def search(cur: np.ndarray) -> Matches:
+            return match_guided(kp_prev.astype(np.float64), z, desc_prev,
+                                KeypointIndex.of_points(kp_cur[cur], desc_cur[cur]), T_cur_prev, K,
+                                config.guided_radius_px, config.match_max_distance)
+
+        g = search(guided)
+        confirmed = len(g.prev_idx) >= config.guided_min_matches
+        if not confirmed and on_object is not None and config.confirm_on_objects:
+            # Segments covering most of the view leave too few keypoints outside them to confirm the
+            # prediction; the static scene under a wrong mask confirms it as well as the scene outside.
+            confirmed = len(search(np.arange(len(kp_cur))).prev_idx) >= config.guided_min_matches
+        if confirmed:
             g_cur = guided[g.cur_idx]
             if on_object is not None:
                 rest_cur = np.flatnonzero(on_object)
