@@ -141,7 +141,7 @@ def test_the_veto_refines_a_prediction_a_few_pixels_off_on_the_static_majority()
 
     def removed(refine):
         res = cull_frame(kp0, ds0, kp1, ds1, d1, np.ones_like(m1), COV,
-                         CullingConfig(refine_prediction=refine), d0, K, T_cur_prev)
+                         CullingConfig(refine_prediction_below=1.0 if refine else 0.0), d0, K, T_cur_prev)
         return precision_recall(res.removed(kp1), kp1, m1)
 
     assert removed(True)[0] >= 0.9 and removed(True)[1] >= 0.9
