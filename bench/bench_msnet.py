@@ -9,8 +9,9 @@ pooled over frames) with the DeepLabV3-257 teacher on the 10 fr3 walking_halfsph
 trains on these frames with this teacher's labels, so for its checkpoint this column is a training-set figure,
 not a held-out one; walking_xyz and the COCO held-out split are never trained on); with `--sequence`
 (generated sequences with truth), the pooled IoU, precision and recall of the potentially dynamic mask against
-the true masks on every n-th frame; median latency of `segment()` on 640x480 frames (resize in, full-resolution labels and probabilities out). MSNET runs twice: as
-shipped (bilinear upsampling of its probabilities) and with the optional guided upsampling (`guided_radius` 13).
+the true masks on every n-th frame; median latency of `segment()` on 640x480 frames (resize in, full-resolution
+labels and probabilities out). MSNET runs twice: as shipped (bilinear upsampling of its probabilities) and with
+the optional guided upsampling (`guided_radius` 13).
 Teachers missing from ../shared/models are skipped. Timings on a shared machine vary with its load: the load
 average is printed.
 """

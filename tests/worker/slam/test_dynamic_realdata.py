@@ -44,7 +44,7 @@ def test_culling_removes_real_people_and_saves_tracking(augmented, tmp_path):
     assert truth["feature_precision"] >= 0.7 and truth["feature_recall"] >= 0.6  # measured 0.79 / 0.70
     c = culled["culling"]
     # guided matching needs a good prediction: 83 of 89 frames before the veto, 77 with it (the jumping window),
-    # 79 since `confirm_on_objects` and `refine_prediction` (ATE 0.0665 m)
+    # 79 since `confirm_on_objects` (ATE 0.0666 m)
     assert c["guided_matching_frames"] >= 0.8 * c["frames_compared"]
 
 
