@@ -32,22 +32,22 @@ TEACHERS = {
 }
 
 
-def pooled_iou(pairs) -> float:
+def pooled_scores(pairs) -> tuple[float, float, float]:
+    """IoU, precision and recall of predicted masks against true ones, pixels pooled over (pred, truth) pairs."""
     import numpy as np
 
-    inter = union = 0
+    inter = pred = true = 0
     for a, b in pairs:
-        inter += np.logical_and(a, b).sum()
-        union += np.logical_or(a, b).sum()
-    return float(inter / union) if union else float("nan")
+        inter += int(np.logical_and(a, b).sum())
+        pred += int(a.sum())
+        true += int(b.sum())
+    union = pred + true - inter
+    nan = float("nan")
+    return (inter / union if union else nan, inter / pred if pred else nan, inter / true if true else nan)
 
 
-def precision_recall(pairs) -> tuple[float, float]:
-    """Pooled pixel precision and recall of predicted masks against true ones, over (pred, truth) pairs."""
-    import numpy as np
-
-    inter = sum(int(np.logical_and(a, b).sum()) for a, b in pairs)
-    return inter / max(sum(int(a.sum()) for a, _ in pairs), 1), inter / max(sum(int(b.sum()) for _, b in pairs), 1)
+def pooled_iou(pairs) -> float:
+    return pooled_scores(pairs)[0]
 
 
 def main() -> None:
@@ -91,7 +91,8 @@ def main() -> None:
         seq, truth = Sequence(root, parse_camera("7scenes")), load_truth(root)
         if truth is None:
             ap.error(f"{root} has no truth/ folder")
-        truth_frames += [(seq[i].rgb, truth.mask(i)) for i in range(0, min(args.frames, len(seq)), args.every)]
+        truth_frames += [(read_rgb(seq.frames[i].rgb_path), truth.mask(i))  # RGB only: depth is not needed
+                         for i in range(0, min(args.frames, len(seq)), args.every)]
 
     ckpt = str(args.checkpoint) if args.checkpoint else None
     segmenters = {
@@ -116,7 +117,7 @@ def main() -> None:
         lat = measure_latency(seg, half + [xyz_rgb], repeats=args.repeats)
         miou = np.mean([v for k, v in m.iou.items() if v is not None and k in seg.classes])
         pairs = [(seg.segment(rgb).dynamic_mask(), gt) for rgb, gt in truth_frames]
-        aug = (pooled_iou(pairs), *precision_recall(pairs)) if pairs else None
+        aug = pooled_scores(pairs) if pairs else None
         rows.append((name, iou_xyz, m.iou["person"], miou, agree, aug, lat))
         if args.overlays:
             args.overlays.mkdir(parents=True, exist_ok=True)

@@ -20,6 +20,7 @@ from worker.slam.dynamic.epipolar import (Matches, epipolar_distance, fundamenta
                                           match_orb, predict_positions)
 from worker.slam.dynamic.segments import grow_by_depth, split_segments
 from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy
+from worker.slam.features.depth import backproject
 from worker.slam.features.search import KeypointIndex
 
 
@@ -213,9 +214,9 @@ def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None) -> np.nda
         h, w = prev_depth.shape
         z = prev_depth[_pixel(p_prev[:, 1], h), _pixel(p_prev[:, 0], w)]
         has = z > 0
+        X = backproject(p_prev, z, K)  # (N, 3) previous-camera points; meaningful where `has`
         usable = _spread(np.flatnonzero(has & static), config.fit_max_points)
         if len(usable) >= 6:
-            X = np.stack([(p_prev[:, 0] - K[0, 2]) / K[0, 0] * z, (p_prev[:, 1] - K[1, 2]) / K[1, 1] * z, z], 1)
             pose = _relative_pose(X[usable], p_cur[usable].astype(np.float64), K, T_init, config)
             if pose is not None:
                 proj, _ = cv2.projectPoints(X[has], *pose, K, None)
@@ -224,23 +225,22 @@ def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None) -> np.nda
         if config.prediction_veto and T_init is not None and has.any():
             # refined only where segments hold nearly all matches (see `refine_prediction_below`)
             refine = static.mean() < config.refine_prediction_below
-            T_veto = _veto_pose(p_prev, p_cur, z, has, K, T_init, config) if refine else T_init
+            T_veto = _veto_pose(X, p_cur, has, K, T_init, config) if refine else T_init
             pred = predict_positions(p_prev[has], z[has], T_veto, K)
             score[has] = np.fmin(score[has], np.linalg.norm(pred - p_cur[has], axis=1))  # NaN (behind) = no veto
     score[np.isinf(score)] = 0.0  # not measurable
     return score
 
 
-def _veto_pose(p_prev, p_cur, z, has, K, T_init, config) -> np.ndarray:
-    """4x4 T_cur_prev for the prediction veto: the prediction refined on every matched point with depth (the
-    static majority pulls it onto the scene's motion; see `refine_prediction_below`), or the prediction itself."""
+def _veto_pose(X, p_cur, has, K, T_init, config) -> np.ndarray:
+    """4x4 T_cur_prev for the prediction veto: the prediction refined on the matched points X (N,3) m that have
+    depth (`has`) and are seen at p_cur (N,2) px (the static majority pulls it onto the scene's motion; see
+    `refine_prediction_below`), or the prediction itself."""
     idx = _spread(np.flatnonzero(has), config.fit_max_points)
     if len(idx) < 6:
         return T_init
-    X = np.stack([(p_prev[idx, 0] - K[0, 2]) / K[0, 0] * z[idx], (p_prev[idx, 1] - K[1, 2]) / K[1, 1] * z[idx],
-                  z[idx]], 1)
     # tight gates: movers within a wide first gate pull the pose along with the scene
-    pose = _refine_from(X, p_cur[idx].astype(np.float64), K, T_init, config, gates=(3.0, 1.0))
+    pose = _refine_from(X[idx], p_cur[idx].astype(np.float64), K, T_init, config, gates=(3.0, 1.0))
     if pose is None:
         return T_init
     T = np.eye(4)
