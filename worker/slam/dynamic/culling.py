@@ -251,30 +251,39 @@ def _veto_pose(X, p_cur, has, K, T_init, config) -> np.ndarray:
 def _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr, config) -> np.ndarray:
     """`dynamic` (H, W) with the static-looking parts of large dynamic segments kept (see `local_px`)."""
     h, w = labels.shape
-    area = np.bincount(labels.ravel(), minlength=len(moving_label))
-    large = np.flatnonzero(area >= config.local_min_area * h * w)
+    s = config.local_step_px
+    gy, gx = np.mgrid[s // 2:h:s, s // 2:w:s]  # a coarse pixel grid, decided then spread to its cells
+    grid_labels = labels[gy, gx]
+    # a segment's area from the grid (one sample per s x s cell): no pass over the full image per frame
+    area = np.bincount(grid_labels.ravel(), minlength=len(moving_label)) * s * s
+    large = np.flatnonzero((area >= config.local_min_area * h * w) & moving_label)
     large = large[large > 0]
     if not len(large):
         return dynamic
     out = dynamic.copy()
-    s = config.local_step_px
-    gy, gx = np.mgrid[s // 2:h:s, s // 2:w:s]  # a coarse pixel grid, decided then spread to its cells
-    for lab in large[moving_label[large]]:
+    for lab in large:
         on = point_label == lab
         if on.sum() < config.local_k:
             continue
-        cell = labels[gy, gx] == lab
+        cell = grid_labels == lab
         q = np.stack([gx[cell], gy[cell]], 1)
         dist, idx = cKDTree(np.stack([xi[on], yi[on]], 1)).query(q, k=config.local_k)
         # only towards "static": a few bad matches among a moving object's points must not keep it, but k
         # nearby points that all agree with the static scene are not on it (one-way: a small moving part of a
         # segment judged static is not looked for; k points are a weaker test than the whole segment's)
         keep = (dist[:, -1] <= config.local_px) & (np.median(scores[on][idx], axis=1) <= thr)
-        flag = np.zeros(cell.shape, np.uint8)
+        if not keep.any():
+            continue
+        flag = np.zeros(cell.shape, bool)
         flag[cell] = keep
-        grid = cv2.resize(flag, (gx.shape[1] * s, gx.shape[0] * s), interpolation=cv2.INTER_NEAREST)[:h, :w]
-        grid = np.pad(grid, ((0, h - grid.shape[0]), (0, w - grid.shape[1])))
-        out[(labels == lab) & (grid > 0)] = False
+        # spread the kept cells to their s x s pixels, within the cells' bounding box only
+        rows, cols = np.flatnonzero(flag.any(1)), np.flatnonzero(flag.any(0))
+        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        block = np.repeat(np.repeat(flag[r0:r1, c0:c1], s, 0), s, 1)
+        y0, x0 = r0 * s, c0 * s
+        y1, x1 = min(r1 * s, h), min(c1 * s, w)
+        window = out[y0:y1, x0:x1]
+        window[(labels[y0:y1, x0:x1] == lab) & block[:y1 - y0, :x1 - x0]] = False
     return out
 
 

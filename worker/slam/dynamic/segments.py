@@ -9,15 +9,16 @@ import numpy as np
 def depth_edges(depth: np.ndarray, rel_jump: float = 0.05) -> np.ndarray:
     """bool (H, W): pixels where depth jumps by more than `rel_jump` of itself to a 4-neighbour, or is invalid."""
     d = depth.astype(np.float32)
-    edges = d <= 0
-    # (pixel, next pixel) along each axis as views of `d` and `edges`: no copies of the image
-    pairs = ((np.s_[:-1], np.s_[1:]), (np.s_[:, :-1], np.s_[:, 1:]))
-    for first, second in pairs:
-        a, b = d[first], d[second]
-        jump = np.abs(b - a) > rel_jump * np.maximum(np.minimum(a, b), 1e-3)
+    # |b - a| > rel * min(a, b)  <=>  |ln b - ln a| > ln(1 + rel): one log, then OpenCV's absdiff per axis
+    # (half the time of the ratio in numpy on a full frame; the same edges on the benchmark frames)
+    log_d = cv2.log(np.maximum(d, np.float32(1e-3)))
+    c = float(np.log1p(rel_jump))
+    edges = (d <= 0).view(np.uint8)
+    for first, second in ((np.s_[:-1], np.s_[1:]), (np.s_[:, :-1], np.s_[:, 1:])):
+        jump = (cv2.absdiff(log_d[first], log_d[second]) > c).view(np.uint8)
         edges[first] |= jump
         edges[second] |= jump
-    return edges
+    return edges.view(bool)
 
 
 def split_segments(mask: np.ndarray, depth: np.ndarray, min_area: int = 200,
@@ -42,20 +43,22 @@ def split_segments(mask: np.ndarray, depth: np.ndarray, min_area: int = 200,
 
 def _split(m: np.ndarray, depth: np.ndarray, min_area: int, rel_jump: float) -> np.ndarray:
     inner = m & ~depth_edges(depth, rel_jump)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(inner.astype(np.uint8), connectivity=4)
-    keep = np.zeros(n, np.int32)
-    big = [i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= min_area]
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(inner.view(np.uint8), connectivity=4)
+    # uint16 labels (VGA: at most H*W/min_area = 1536 segments): OpenCV dilates them directly, no float copies
+    keep = np.zeros(n, np.uint16 if n <= np.iinfo(np.uint16).max else np.float32)
+    big = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= min_area) + 1
     keep[big] = np.arange(1, len(big) + 1)
-    labels = keep[labels]
+    grown = keep[labels]
     # Give the cut-out edge pixels (and small fragments) of the mask to the nearest kept segment.
-    grown = labels.copy()
+    square = np.ones((5, 5), np.uint8)
     for _ in range(3):
-        if not (m & (grown == 0)).any():
+        todo = m & (grown == 0)
+        if not todo.any():
             break
-        dil = cv2.dilate(grown.astype(np.float32), np.ones((5, 5), np.uint8)).astype(np.int32)
-        fill = m & (grown == 0) & (dil > 0)
+        dil = cv2.dilate(grown, square)
+        fill = todo & (dil > 0)
         grown[fill] = dil[fill]
-    return grown
+    return grown.astype(np.int32)
 
 
 def grow_by_depth(region: np.ndarray, depth: np.ndarray, grow_px: int, rel_tol: float = 0.15,
