@@ -7,6 +7,9 @@ import numpy as np
 
 def hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise Hamming distance of uint8 descriptors `a`, `b` (..., 32) -> (...) int."""
+    a, b = np.ascontiguousarray(a), np.ascontiguousarray(b)
+    if a.shape[-1] % 8 == 0:  # as 64-bit words: 8x fewer elements to xor and count (ORB: 4 per descriptor)
+        a, b = a.view(np.uint64), b.view(np.uint64)
     return np.bitwise_count(np.bitwise_xor(a, b)).sum(axis=-1, dtype=np.int32)
 
 
