@@ -11,7 +11,7 @@ not a held-out one; walking_xyz and the COCO held-out split are never trained on
 (generated sequences with truth), the pooled IoU, precision and recall of the potentially dynamic mask against
 the true masks on every n-th frame; median latency of `segment()` on 640x480 frames (resize in, full-resolution
 labels and probabilities out). MSNET runs twice: as shipped (bilinear upsampling of its probabilities) and with
-the optional guided upsampling (`guided_radius` 13).
+the optional guided upsampling (`guided_radius` 13, `guided.CHOSEN_RADIUS`).
 Teachers missing from ../shared/models are skipped. Timings on a shared machine vary with its load: the load
 average is printed.
 """
@@ -71,6 +71,7 @@ def main() -> None:
     from worker.slam.io.images import read_rgb
     from worker.slam.io.sequence import Sequence
     from worker.slam.segmentation import SegmenterConfig, make_segmenter
+    from worker.slam.segmentation.guided import CHOSEN_RADIUS
     from worker.slam.segmentation.msnet.checkpoint import load_model
     from worker.slam.segmentation.evaluate import evaluate_segmenter, labelled_samples, measure_latency, overlay, \
         tum_person_mask
@@ -98,7 +99,7 @@ def main() -> None:
     segmenters = {
         "MSNET (ours)": make_segmenter(SegmenterConfig(checkpoint=ckpt, device="cpu", threads=args.threads)),
         "MSNET + guided upsampling (option)": make_segmenter(SegmenterConfig(
-            checkpoint=ckpt, device="cpu", threads=args.threads, guided_radius=13)),
+            checkpoint=ckpt, device="cpu", threads=args.threads, guided_radius=CHOSEN_RADIUS)),
     }
     for name, file in TEACHERS.items():
         if (args.shared / "models" / file).is_file():
