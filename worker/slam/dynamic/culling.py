@@ -287,7 +287,7 @@ def _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores,
     return out
 
 
-def _dilate(mask: np.ndarray, px: int) -> np.ndarray:
+def dilate_disc(mask: np.ndarray, px: int) -> np.ndarray:
     """`mask` (H, W) bool grown by a disc of radius `px`, computed only around its bounding box."""
     out = np.zeros_like(mask, dtype=bool)
     x, y, w, h = cv2.boundingRect(mask.astype(np.uint8))
@@ -390,7 +390,7 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     dynamic = moving_label[labels] if moving_label.any() else np.zeros((h, w), bool)
     if config.local_px > 0 and n_labels:
         dynamic = _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr, config)
-    exclude = _dilate(dynamic, config.dilation_px)
+    exclude = dilate_disc(dynamic, config.dilation_px)
     if config.detect_unknown or not use_sem:
         moving_pts = scores > thr
         clusters = np.zeros_like(dynamic)
@@ -401,7 +401,7 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
                                              float(np.median(scores[inside])) if inside.any() else 0.0, True))
             clusters |= region
         dynamic |= clusters
-        exclude |= _dilate(clusters, config.cluster_dilation_px)
+        exclude |= dilate_disc(clusters, config.cluster_dilation_px)
     return CullingResult(dynamic, exclude, decisions, thr, entropy, len(p_prev), scores, p_cur, m.guided)
 
 

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from worker.slam.camera import Camera
-from worker.slam.dynamic.culling import CullingConfig, cull_frame, mask_at
+from worker.slam.dynamic.culling import CullingConfig, cull_frame, dilate_disc, mask_at
 from worker.slam.errors import SequenceFormatError
 from worker.slam.features.types import Features
 from worker.slam.io.sequence import Frame
@@ -142,8 +142,7 @@ class CullingStage:
                 self.scores.add_features(frame.index, feats.uv[removed], feats.uv[~removed])
         elif self.use_segmentation and inputs.potentially_dynamic is not None and len(feats):
             # Nothing to compare with yet (first frame): keep potentially dynamic objects out of the new map.
-            k = 2 * self.cfg.culling.dilation_px + 1
-            inputs.exclude_mask = cv2.dilate(inputs.potentially_dynamic.astype(np.uint8), np.ones((k, k))) > 0
+            inputs.exclude_mask = dilate_disc(inputs.potentially_dynamic, self.cfg.culling.dilation_px)
             inputs.dynamic_mask = inputs.potentially_dynamic
             removed = mask_at(inputs.exclude_mask, feats.uv)
         inputs.features = feats.select(~removed)

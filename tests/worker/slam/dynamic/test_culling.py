@@ -256,7 +256,7 @@ def test_growth_completes_a_half_segmented_moving_object_in_cull_frame():
 
 
 def test_exclusion_band_matches_a_full_image_dilation():
-    from worker.slam.dynamic.culling import _dilate
+    from worker.slam.dynamic.culling import dilate_disc
 
     rng = np.random.default_rng(0)
     for _ in range(10):
@@ -267,4 +267,4 @@ def test_exclusion_band_matches_a_full_image_dilation():
         for px in (0, 3, 15):
             k = 2 * px + 1
             full = cv2.dilate(mask.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
-            assert np.array_equal(_dilate(mask, px), full)
+            assert np.array_equal(dilate_disc(mask, px), full)
