@@ -448,10 +448,13 @@ def _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur
         h, w = prev_depth.shape
         z = prev_depth[_pixel(kp_prev[:, 1], h), _pixel(kp_prev[:, 0], w)]
 
-        def search(cur: np.ndarray) -> Matches:
-            return match_guided(kp_prev.astype(np.float64), z, desc_prev,
-                                KeypointIndex.of_points(kp_cur[cur], desc_cur[cur]), T_cur_prev, K,
-                                config.guided_radius_px, config.match_max_distance)
+        def search(cur: np.ndarray, prev: np.ndarray | None = None) -> Matches:
+            """Guided matches of the current keypoints `cur` among the previous ones `prev` (None = all)."""
+            prev = np.arange(len(kp_prev)) if prev is None else prev
+            m = match_guided(kp_prev[prev].astype(np.float64), z[prev], desc_prev[prev],
+                             KeypointIndex.of_points(kp_cur[cur], desc_cur[cur]), T_cur_prev, K,
+                             config.guided_radius_px, config.match_max_distance)
+            return Matches(prev[m.prev_idx], m.cur_idx)
 
         g = search(guided)
         confirmed = len(g.prev_idx) >= config.guided_min_matches
@@ -463,15 +466,17 @@ def _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur
             g_cur = guided[g.cur_idx]
             if on_object is not None:
                 rest_cur = np.flatnonzero(on_object)
-                rest_prev = _near_box(predict_positions(kp_prev.astype(np.float64), z, T_cur_prev, K),
-                                      kp_cur[rest_cur], config.object_margin_px)
+                pred = predict_positions(kp_prev.astype(np.float64), z, T_cur_prev, K)
+                rest_prev = _near_box(pred, kp_cur[rest_cur], config.object_margin_px)
             else:
                 rest_cur = np.setdiff1d(np.arange(len(kp_cur)), g_cur)
                 rest_prev = np.setdiff1d(np.arange(len(kp_prev)), g.prev_idx)
             b = match_orb(desc_prev[rest_prev], desc_cur[rest_cur], config.match_max_distance)
             b_prev, b_cur = rest_prev[b.prev_idx], rest_cur[b.cur_idx]
             if on_object is not None and config.prefer_static_within >= 0 and len(b_cur):
-                b_prev, b_cur = _prefer_static(b_prev, b_cur, search(b_cur), desc_prev, desc_cur,
+                # only previous keypoints that can land within the search radius (doubled without depth)
+                reach = _near_box(pred, kp_cur[b_cur], 2 * config.guided_radius_px)
+                b_prev, b_cur = _prefer_static(b_prev, b_cur, search(b_cur, reach), desc_prev, desc_cur,
                                                config.prefer_static_within)
             free = ~np.isin(b_prev, g.prev_idx)  # a previous keypoint matched twice keeps its guided match
             return _FrameMatches(np.concatenate([g.prev_idx, b_prev[free]]),
