@@ -207,6 +207,28 @@ def test_segments_split_at_depth_jumps():
     assert len(np.unique(labels[20:80, 10:48])) == 1 and len(np.unique(labels[20:80, 52:90])) == 1
 
 
+def test_depth_edges_are_the_relative_jumps_between_4_neighbours_and_the_holes():
+    from worker.slam.dynamic.segments import depth_edges
+
+    rng = np.random.default_rng(3)
+    depth = rng.uniform(0.5, 4.0, (60, 80)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.9] = 2.0  # mostly flat, so the jumps are sparse
+    depth[rng.random(depth.shape) < 0.05] = 0.0  # holes
+    depth[8:23, 8:14] = 2.0  # a flat patch around two bumps
+    depth[10, 11] = 2.0 * 1.049  # a bump just under a 5 % jump to its four neighbours
+    depth[20, 11] = 2.0 * 1.051  # and one just over
+    expected = depth <= 0
+    for axis in (0, 1):
+        a, b = np.moveaxis(depth, axis, 0)[:-1], np.moveaxis(depth, axis, 0)[1:]
+        jump = np.abs(b - a) > 0.05 * np.maximum(np.minimum(a, b), 1e-3)
+        e = np.moveaxis(expected, axis, 0)
+        e[:-1] |= jump
+        e[1:] |= jump
+    edges = depth_edges(depth, 0.05)
+    assert np.array_equal(edges, expected)
+    assert not edges[9:12, 10:13].any() and edges[20, 10:13].all() and edges[19:22, 11].all()
+
+
 def test_predicted_positions_follow_depth_and_rotation():
     from worker.slam.dynamic.epipolar import predict_positions
     uv = np.array([[100.0, 80.0], [320.0, 240.0], [500.0, 400.0]])
