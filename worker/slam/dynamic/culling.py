@@ -439,21 +439,21 @@ def _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur
 
     With segments (`on_object` (M,) bool), the current keypoints on objects are brute-forced against the
     previous keypoints predicted near them (giving way to a nearly as good guided match, `prefer_static_within`)
-    and the rest are guided. Without (`on_object` None, geometry-only)
-    everything is guided first, then what is left on both sides is brute-forced: the moving points a search
-    radius misses are exactly what the geometric path looks for."""
+    and the rest are guided. Without (`on_object` None, geometry-only) everything is guided first, then what is
+    left on both sides is brute-forced: the moving points a search radius misses are exactly what the geometric
+    path looks for."""
     guided = np.flatnonzero(~on_object) if on_object is not None else np.arange(len(kp_cur))
     if T_cur_prev is not None and K is not None and prev_depth is not None and len(kp_prev) and len(kp_cur):
         h, w = prev_depth.shape
         z = prev_depth[_pixel(kp_prev[:, 1], h), _pixel(kp_prev[:, 0], w)]
+        uv_prev = kp_prev.astype(np.float64)
 
         def search(cur: np.ndarray, prev: np.ndarray | None = None) -> Matches:
             """Guided matches of the current keypoints `cur` among the previous ones `prev` (None = all)."""
-            prev = np.arange(len(kp_prev)) if prev is None else prev
-            m = match_guided(kp_prev[prev].astype(np.float64), z[prev], desc_prev[prev],
-                             KeypointIndex.of_points(kp_cur[cur], desc_cur[cur]), T_cur_prev, K,
-                             config.guided_radius_px, config.match_max_distance)
-            return Matches(prev[m.prev_idx], m.cur_idx)
+            sel = np.s_[:] if prev is None else prev  # all: views, no copies
+            m = match_guided(uv_prev[sel], z[sel], desc_prev[sel], KeypointIndex.of_points(kp_cur[cur], desc_cur[cur]),
+                             T_cur_prev, K, config.guided_radius_px, config.match_max_distance)
+            return m if prev is None else Matches(prev[m.prev_idx], m.cur_idx)
 
         g = search(guided)
         confirmed = len(g.prev_idx) >= config.guided_min_matches
@@ -465,7 +465,7 @@ def _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur
             g_cur = guided[g.cur_idx]
             if on_object is not None:
                 rest_cur = np.flatnonzero(on_object)
-                pred = predict_positions(kp_prev.astype(np.float64), z, T_cur_prev, K)
+                pred = predict_positions(uv_prev, z, T_cur_prev, K)
                 rest_prev = _near_box(pred, kp_cur[rest_cur], config.object_margin_px)
             else:
                 rest_cur = np.setdiff1d(np.arange(len(kp_cur)), g_cur)
