@@ -10,6 +10,12 @@ error, ms per frame of culling and restoration, and end-to-end fps. Benchmarks p
 `--summary` adds each preset's mean, min and max over the sequences: give it several sequences of one kind
 (`vtdslam augment --seed 1`, `--seed 2`, ...). One 300-frame run's ATE swings by tens of percent with small
 changes (which features happen to survive), so presets and settings are compared on such means.
+
+`--references` adds two rows per sequence with truth, both run on the truth's background frames (the same
+frames without people): `people-free` (`orb-only`), the denominator of "within 1.2x of the ATE without
+people", and `masks removed` (`no-restoration` with every truth segment cut out, no motion test), what a
+perfect culler would get: the static scene behind the people is lost to tracking either way, and only
+restoration can bring it back. The summary then gives each preset's mean as a multiple of both.
 """
 from __future__ import annotations
 
@@ -26,13 +32,32 @@ from worker.slam.camera import parse_camera  # noqa: E402
 from worker.slam.config import get_preset  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.pipeline import run_pipeline  # noqa: E402
+from worker.slam.truth import load_truth, write_background_sequence  # noqa: E402
+
+#: Reference rows (`--references`): label -> (preset, overrides), run on the truth's background frames.
+REFERENCES = {
+    "people-free": ("orb-only", {}),
+    # every truth segment judged moving (a threshold no score is below) and cut out
+    "masks removed": ("no-restoration", {"segmentation": {"source": "truth"},
+                                         "culling": {"culling": {"threshold": {"fixed": -1.0}}}}),
+}
 
 
 def _fmt(v, nd=3, scale=1.0):
     return "–" if v is None else f"{v * scale:.{nd}f}"
 
 
-def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, overrides: dict | None) -> dict:
+def _merged(base: dict | None, extra: dict) -> dict:
+    """`base` with `extra` merged in, nested dicts merged key by key (neither is changed)."""
+    out = dict(base or {})
+    for k, v in extra.items():
+        out[k] = _merged(out.get(k), v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, overrides: dict | None,
+        label: str | None = None, name: str | None = None) -> dict:
+    """One bench row; `label` names the row instead of the preset, `name` the sequence instead of its folder."""
     seq = Sequence(seq_dir, parse_camera(camera))
     with tempfile.TemporaryDirectory() as out:
         m = run_pipeline(seq, get_preset(preset, overrides), out, max_frames=max_frames).metrics
@@ -40,7 +65,8 @@ def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, override
     ct, rt = cull.get("truth", {}), rest.get("truth", {})
     info = m.get("stage_info", {})
     return {
-        "sequence": Path(seq_dir).name, "preset": preset, "frames": m["frames"], "tracked": m["tracked"],
+        "sequence": name or Path(seq_dir).name, "preset": label or preset, "frames": m["frames"],
+        "tracked": m["tracked"],
         "ate": m.get("ate", {}).get("rmse"), "rpe_t": m.get("rpe", {}).get("trans", {}).get("rmse"),
         "rpe_r": m.get("rpe", {}).get("rot_deg", {}).get("rmse"),
         "kept": info.get("features_kept"), "removed": info.get("features_removed"),
@@ -61,6 +87,8 @@ def main() -> None:
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--config", default=None, help="JSON overrides applied to every preset")
     ap.add_argument("--summary", action="store_true", help="also print each preset's mean over the sequences")
+    ap.add_argument("--references", action="store_true",
+                    help="also run `people-free` and `masks removed` on each sequence's truth backgrounds")
     args = ap.parse_args()
     overrides = json.loads(args.config) if args.config else None
     print("| sequence | preset | frames | tracked | ATE rmse (m) | RPE t (m/s) | RPE r (°/s) | static feats/frame "
@@ -70,25 +98,40 @@ def main() -> None:
     rows = []
     for spec in args.sequence:
         seq_dir, _, camera = spec.rpartition(":")
-        for preset in args.presets.split(","):
-            r = row(seq_dir, camera, preset, args.max_frames, overrides)
-            rows.append(r)
-            print(f"| {r['sequence']} | {preset} | {r['frames']} | {r['tracked']} | {_fmt(r['ate'], 4)} | "
-                  f"{_fmt(r['rpe_t'], 4)} | {_fmt(r['rpe_r'], 2)} | {_fmt(r['kept'], 0)} | {_fmt(r['removed'], 1)} | "
-                  f"{_fmt(r['restored_feats'], 1)} | {_fmt(r['precision'], 2)} | {_fmt(r['recall'], 2)} | "
-                  f"{_fmt(r['iou'], 2)} | {_fmt(r['psnr'], 1)} | {_fmt(r['depth_err'], 1, 100)} | "
-                  f"{_fmt(r['seg_ms'], 1)} | {_fmt(r['cull_ms'], 1)} | {_fmt(r['decision_ms'], 1)} | {r['guided']} | "
-                  f"{_fmt(r['rest_ms'], 1)} | {_fmt(r['fps'], 1)} |",
-                  flush=True)
+        with tempfile.TemporaryDirectory() as tmp:
+            runs = [(seq_dir, preset, overrides, None) for preset in args.presets.split(",")]
+            truth = load_truth(seq_dir) if args.references else None
+            if truth is not None:
+                if truth.layout.depth_scale != parse_camera(camera).depth_scale:
+                    raise SystemExit(f"{seq_dir}: the truth's depth scale is not the camera's {camera!r}")
+                bg = str(write_background_sequence(seq_dir, Path(tmp) / "bg"))
+                runs += [(bg, preset, _merged(overrides, extra), label) for label, (preset, extra) in REFERENCES.items()]
+            for run_dir, preset, run_overrides, label in runs:
+                rows.append(row(run_dir, camera, preset, args.max_frames, run_overrides, label,
+                                Path(seq_dir).name))
+                print_row(rows[-1])
     if args.summary:
         print_summary(rows)
 
 
+def print_row(r: dict) -> None:
+    print(f"| {r['sequence']} | {r['preset']} | {r['frames']} | {r['tracked']} | {_fmt(r['ate'], 4)} | "
+          f"{_fmt(r['rpe_t'], 4)} | {_fmt(r['rpe_r'], 2)} | {_fmt(r['kept'], 0)} | {_fmt(r['removed'], 1)} | "
+          f"{_fmt(r['restored_feats'], 1)} | {_fmt(r['precision'], 2)} | {_fmt(r['recall'], 2)} | "
+          f"{_fmt(r['iou'], 2)} | {_fmt(r['psnr'], 1)} | {_fmt(r['depth_err'], 1, 100)} | "
+          f"{_fmt(r['seg_ms'], 1)} | {_fmt(r['cull_ms'], 1)} | {_fmt(r['decision_ms'], 1)} | {r['guided']} | "
+          f"{_fmt(r['rest_ms'], 1)} | {_fmt(r['fps'], 1)} |", flush=True)
+
+
 def print_summary(rows: list[dict]) -> None:
-    """Per preset over the sequences: ATE mean (min–max), frames tracked, dynamic precision/recall means."""
+    """Per preset over the sequences: ATE mean (min–max), frames tracked, dynamic precision/recall means, and
+    the mean as a multiple of the reference rows' means (when `--references` ran)."""
+    refs = {label: _mean([r["ate"] for r in rows if r["preset"] == label]) for label in REFERENCES}
+    refs = {label: v for label, v in refs.items() if v}
     print()
-    print("| preset | sequences | ATE mean (m) | ATE min–max (m) | tracked | dyn. precision | dyn. recall |")
-    print("|---|---|---|---|---|---|---|")
+    print("| preset | sequences | ATE mean (m) | ATE min–max (m) | tracked | dyn. precision | dyn. recall |"
+          + "".join(f" × {label} |" for label in refs))
+    print("|---|---|---|---|---|---|---|" + "---|" * len(refs))
     for preset in dict.fromkeys(r["preset"] for r in rows):
         rs = [r for r in rows if r["preset"] == preset]
         ate = [r["ate"] for r in rs if r["ate"] is not None]
@@ -96,7 +139,8 @@ def print_summary(rows: list[dict]) -> None:
         spread = f"{min(ate):.4f}–{max(ate):.4f}" if ate else "–"
         print(f"| {preset} | {len(rs)} | {_fmt(_mean(ate), 4)} | {spread} | "
               f"{sum(r['tracked'] for r in rs)}/{sum(r['frames'] for r in rs)} | {_fmt(mean('precision'), 2)} | "
-              f"{_fmt(mean('recall'), 2)} |")
+              f"{_fmt(mean('recall'), 2)} |"
+              + "".join(f" {_fmt(_mean(ate) and _mean(ate) / v, 2)} |" for v in refs.values()))
 
 
 def _mean(values: list) -> float | None:

@@ -147,6 +147,27 @@ def write_truth_json(seq_root: Path | str, layout: TruthLayout) -> Path:
     return path
 
 
+def write_background_sequence(seq_root: Path | str, out: Path | str) -> Path:
+    """A sequence folder `out` whose frames are `seq_root`'s truth backgrounds (the same frames without the
+    dynamic objects), with its timestamps, `groundtruth.txt` and `camera.json`, and its `truth/` linked (the
+    masks still say where the objects were). For references: the ATE without people, and with their pixels
+    cut out. Raises SequenceFormatError when `seq_root` has no truth."""
+    seq_root, out = Path(seq_root), Path(out)
+    truth = load_truth(seq_root)
+    if truth is None:
+        raise SequenceFormatError("no truth to take the background frames from", path=seq_root / TRUTH_DIR)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / TRUTH_DIR).symlink_to(truth.root.resolve(), target_is_directory=True)
+    for name in ("groundtruth.txt", "camera.json"):
+        if (seq_root / name).is_file():
+            (out / name).write_bytes((seq_root / name).read_bytes())
+    for kind, listing in (("background_rgb", "rgb.txt"), ("background_depth", "depth.txt")):
+        lines = [f"{t:.6f} {TRUTH_DIR}/{getattr(truth.layout, kind).format(index=i)}"
+                 for i, t in enumerate(truth.layout.timestamps)]
+        (out / listing).write_text("# the truth's background frames\n" + "\n".join(lines) + "\n")
+    return out
+
+
 # ---- scores used by the evaluation of the dynamic stages ----------------------------------------------------
 
 def mask_iou(pred: np.ndarray, truth: np.ndarray) -> float:

@@ -10,7 +10,9 @@ from worker.slam.camera import PRESETS
 from worker.slam.errors import SequenceFormatError
 from worker.slam.io.trajectory import Trajectory
 from worker.slam.synth.writer import SequenceWriter, depth_to_png
-from worker.slam.truth import feature_precision_recall, load_truth, mask_iou, restoration_psnr
+from worker.slam.io.sequence import Sequence
+from worker.slam.truth import (feature_precision_recall, load_truth, mask_iou, restoration_psnr,
+                              write_background_sequence)
 
 
 def test_mask_iou():
@@ -85,6 +87,21 @@ def test_roundtrip_layout(tmp_path):
         assert np.array_equal(f.background_depth, bgd.astype(np.float32) / 5000)
     with pytest.raises(IndexError):
         truth.ids(3)
+
+
+def test_background_sequence_holds_the_frames_without_their_objects(tmp_path):
+    frames = _write_tiny(tmp_path / "seq")
+    with pytest.raises(SequenceFormatError, match="no truth"):
+        write_background_sequence(tmp_path / "bg", tmp_path / "none")  # a folder without truth
+    bg = Sequence(write_background_sequence(tmp_path / "seq", tmp_path / "bg"), PRESETS["tum3"])
+    own = Sequence(tmp_path / "seq", PRESETS["tum3"])
+    assert len(bg) == 3 and np.array_equal(bg.timestamps, own.timestamps)
+    assert bg.groundtruth is not None and np.allclose(bg.groundtruth.poses, own.groundtruth.poses)
+    for i, (rgb, _, ids, background, background_depth) in enumerate(frames):
+        f = bg[i]
+        assert np.array_equal(f.rgb, background) and not np.array_equal(f.rgb, rgb)
+        assert np.array_equal(f.depth, background_depth.astype(np.float32) / 5000)
+        assert np.array_equal(load_truth(tmp_path / "bg").mask(i), ids > 0)  # masks: where the objects were
 
 
 def test_invalid_truth_json_is_reported(tmp_path):
