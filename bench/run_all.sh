@@ -29,12 +29,14 @@ for seed in 1 2 3 4; do
         "$BENCH_DIR/aug_s$seed" --frames 300 --seed "$seed" > /dev/null
     SEEDS+=(--sequence "$BENCH_DIR/aug_s$seed:7scenes")
 done
-$PY bench/bench_dynamic.py "${SEEDS[@]}" --presets orb-only,no-restoration --max-frames 300 --summary
+$PY bench/bench_dynamic.py "${SEEDS[@]}" --presets orb-only,no-restoration --max-frames 300 --summary --references
 $PY bench/bench_dynamic.py "${SEEDS[@]}" --presets no-restoration --max-frames 300 --summary --config "$ORACLE15"
-echo "## the synthetic room without people"
+echo "## the synthetic room without people, and with the people's pixels cut out (--references)"
+$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth:tum3" --presets no-restoration --max-frames 300 --references
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth0:tum3" --presets orb-only,no-restoration --max-frames 300
 echo "## the augmented sequence in full (1000 frames)"
-$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets orb-only,no-restoration --max-frames 1000
+$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets orb-only,no-restoration --max-frames 1000 \
+    --references
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-restoration --max-frames 1000 \
     --config "$ORACLE15"
 echo "## exclusion band 8 and 15 px with MSNET (the 3 px default is in the tables above)"
