@@ -105,7 +105,8 @@ def main() -> None:
                 if truth.layout.depth_scale != parse_camera(camera).depth_scale:
                     raise SystemExit(f"{seq_dir}: the truth's depth scale is not the camera's {camera!r}")
                 bg = str(write_background_sequence(seq_dir, Path(tmp) / "bg"))
-                runs += [(bg, preset, _merged(overrides, extra), label) for label, (preset, extra) in REFERENCES.items()]
+                runs += [(bg, preset, _merged(overrides, extra), label)
+                         for label, (preset, extra) in REFERENCES.items()]
             for run_dir, preset, run_overrides, label in runs:
                 rows.append(row(run_dir, camera, preset, args.max_frames, run_overrides, label,
                                 Path(seq_dir).name))
@@ -125,9 +126,9 @@ def print_row(r: dict) -> None:
 
 def print_summary(rows: list[dict]) -> None:
     """Per preset over the sequences: ATE mean (min–max), frames tracked, dynamic precision/recall means, and
-    the mean as a multiple of the reference rows' means (when `--references` ran)."""
-    refs = {label: _mean([r["ate"] for r in rows if r["preset"] == label]) for label in REFERENCES}
-    refs = {label: v for label, v in refs.items() if v}
+    (when `--references` ran) the ATE mean as a multiple of each reference's, both over the sequences that
+    have that reference."""
+    refs = [label for label in REFERENCES if any(r["preset"] == label for r in rows)]
     print()
     print("| preset | sequences | ATE mean (m) | ATE min–max (m) | tracked | dyn. precision | dyn. recall |"
           + "".join(f" × {label} |" for label in refs))
@@ -139,8 +140,16 @@ def print_summary(rows: list[dict]) -> None:
         spread = f"{min(ate):.4f}–{max(ate):.4f}" if ate else "–"
         print(f"| {preset} | {len(rs)} | {_fmt(_mean(ate), 4)} | {spread} | "
               f"{sum(r['tracked'] for r in rs)}/{sum(r['frames'] for r in rs)} | {_fmt(mean('precision'), 2)} | "
-              f"{_fmt(mean('recall'), 2)} |"
-              + "".join(f" {_fmt(_mean(ate) and _mean(ate) / v, 2)} |" for v in refs.values()))
+              f"{_fmt(mean('recall'), 2)} |" + "".join(f" {_fmt(_ratio(rows, preset, label), 2)} |" for label in refs))
+
+
+def _ratio(rows: list[dict], preset: str, reference: str) -> float | None:
+    """Mean ATE of `preset` over the sequences that have a `reference` row, divided by the reference's mean."""
+    ate = {(r["sequence"], r["preset"]): r["ate"] for r in rows if r["ate"] is not None}
+    seqs = [s for s, p in ate if p == reference and (s, preset) in ate]
+    if not seqs:
+        return None
+    return _mean([ate[s, preset] for s in seqs]) / _mean([ate[s, reference] for s in seqs])
 
 
 def _mean(values: list) -> float | None:
