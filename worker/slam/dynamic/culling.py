@@ -447,12 +447,13 @@ def _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur
         h, w = prev_depth.shape
         z = prev_depth[_pixel(kp_prev[:, 1], h), _pixel(kp_prev[:, 0], w)]
         uv_prev = kp_prev.astype(np.float64)
+        pred = predict_positions(uv_prev, z, T_cur_prev, K)  # (N, 2) px, once for every search below
 
         def search(cur: np.ndarray, prev: np.ndarray | None = None) -> Matches:
             """Guided matches of the current keypoints `cur` among the previous ones `prev` (None = all)."""
             sel = np.s_[:] if prev is None else prev  # all: views, no copies
             m = match_guided(uv_prev[sel], z[sel], desc_prev[sel], KeypointIndex.of_points(kp_cur[cur], desc_cur[cur]),
-                             T_cur_prev, K, config.guided_radius_px, config.match_max_distance)
+                             T_cur_prev, K, config.guided_radius_px, config.match_max_distance, pred=pred[sel])
             return m if prev is None else Matches(prev[m.prev_idx], m.cur_idx)
 
         g = search(guided)
@@ -465,7 +466,6 @@ def _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur
             g_cur = guided[g.cur_idx]
             if on_object is not None:
                 rest_cur = np.flatnonzero(on_object)
-                pred = predict_positions(uv_prev, z, T_cur_prev, K)
                 rest_prev = _near_box(pred, kp_cur[rest_cur], config.object_margin_px)
             else:
                 rest_cur = np.setdiff1d(np.arange(len(kp_cur)), g_cur)

@@ -51,10 +51,11 @@ def predict_positions(uv_prev: np.ndarray, z_prev: np.ndarray, T_cur_prev: np.nd
 
 def match_guided(uv_prev: np.ndarray, z_prev: np.ndarray, desc_prev: np.ndarray, cur: KeypointIndex,
                  T_cur_prev: np.ndarray, K: np.ndarray, radius_px: float = 24.0, max_distance: int = 50,
-                 ratio: float = 0.9) -> Matches:
+                 ratio: float = 0.9, pred: np.ndarray | None = None) -> Matches:
     """Matches of previous keypoints (N,2) px, depth (N,) m, ORB (N,32) to the current frame's keypoints
-    (`cur`) within `radius_px` of their predicted positions (twice that without depth: no parallax known)."""
-    pred = predict_positions(uv_prev, z_prev, T_cur_prev, K)
+    (`cur`) within `radius_px` of their predicted positions (twice that without depth: no parallax known).
+    `pred` (N,2) px: those positions when the caller has them (`predict_positions`), else computed here."""
+    pred = predict_positions(uv_prev, z_prev, T_cur_prev, K) if pred is None else pred
     inside = np.flatnonzero(np.isfinite(pred).all(1))
     radius = np.where(z_prev[inside] > 0, radius_px, 2 * radius_px)
     pi, ci = match_near_predictions(cur, pred[inside], desc_prev[inside], radius, max_distance, ratio)
