@@ -398,7 +398,7 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
             labels[grown & (labels == 0)] = lab
         point_label = labels[yi, xi]
     # one pass over the image for all segments (none when nothing moves)
-    dynamic = moving_label[labels] if moving_label.any() else np.zeros((h, w), bool)
+    dynamic = np.take(moving_label, labels) if moving_label.any() else np.zeros((h, w), bool)  # = moving_label[labels]
     if config.local_px > 0 and n_labels:
         dynamic = _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr, config)
     exclude = dilate_disc(dynamic, config.dilation_px)
