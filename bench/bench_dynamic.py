@@ -47,20 +47,16 @@ def _fmt(v, nd=3, scale=1.0):
     return "–" if v is None else f"{v * scale:.{nd}f}"
 
 
-def _merged(base: dict | None, extra: dict) -> dict:
-    """`base` with `extra` merged in, nested dicts merged key by key (neither is changed)."""
-    out = dict(base or {})
-    for k, v in extra.items():
-        out[k] = _merged(out.get(k), v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
-
-
 def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, overrides: dict | None,
-        label: str | None = None, name: str | None = None) -> dict:
-    """One bench row; `label` names the row instead of the preset, `name` the sequence instead of its folder."""
+        label: str | None = None, name: str | None = None, extra: dict | None = None) -> dict:
+    """One bench row; `label` names the row instead of the preset, `name` the sequence instead of its folder,
+    `extra` overrides applied after `overrides` (a reference's own settings)."""
     seq = Sequence(seq_dir, parse_camera(camera))
+    config = get_preset(preset, overrides)
+    if extra:
+        config = config.with_overrides(extra)
     with tempfile.TemporaryDirectory() as out:
-        m = run_pipeline(seq, get_preset(preset, overrides), out, max_frames=max_frames).metrics
+        m = run_pipeline(seq, config, out, max_frames=max_frames).metrics
     cull, rest = m.get("culling", {}), m.get("restoration", {})
     ct, rt = cull.get("truth", {}), rest.get("truth", {})
     info = m.get("stage_info", {})
@@ -99,17 +95,16 @@ def main() -> None:
     for spec in args.sequence:
         seq_dir, _, camera = spec.rpartition(":")
         with tempfile.TemporaryDirectory() as tmp:
-            runs = [(seq_dir, preset, overrides, None) for preset in args.presets.split(",")]
+            runs = [(seq_dir, preset, None, None) for preset in args.presets.split(",")]
             truth = load_truth(seq_dir) if args.references else None
             if truth is not None:
                 if truth.layout.depth_scale != parse_camera(camera).depth_scale:
                     raise SystemExit(f"{seq_dir}: the truth's depth scale is not the camera's {camera!r}")
                 bg = str(write_background_sequence(seq_dir, Path(tmp) / "bg"))
-                runs += [(bg, preset, _merged(overrides, extra), label)
-                         for label, (preset, extra) in REFERENCES.items()]
-            for run_dir, preset, run_overrides, label in runs:
-                rows.append(row(run_dir, camera, preset, args.max_frames, run_overrides, label,
-                                Path(seq_dir).name))
+                runs += [(bg, preset, extra, label) for label, (preset, extra) in REFERENCES.items()]
+            for run_dir, preset, extra, label in runs:
+                rows.append(row(run_dir, camera, preset, args.max_frames, overrides, label, Path(seq_dir).name,
+                                extra))
                 print_row(rows[-1])
     if args.summary:
         print_summary(rows)
