@@ -61,7 +61,7 @@ def run_odometry(seq_dir: str, camera: str, start: int, max_frames: int | None) 
     from worker.slam.evaluation.metrics import evaluate
     from worker.slam.io.sequence import Sequence
     from worker.slam.io.trajectory import Trajectory
-    from worker.slam.tracking.se3 import inv, orthonormalize
+    from worker.slam.geometry.se3 import inv, orthonormalize
 
     seq = Sequence(seq_dir, parse_camera(camera))
     stop = len(seq) if max_frames is None else min(len(seq), start + max_frames)

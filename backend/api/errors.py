@@ -1,6 +1,6 @@
 """One error shape for every failure: ``{"error": {"code", "message", "detail"}}``.
 
-Domain errors (:class:`storage.errors.StorageError`) keep their status and code; request validation
+Domain errors (:class:`storage.errors.StorageError`) and the api's own (:class:`ApiError`) keep their status and code; request validation
 errors become 422 ``invalid_input``; HTTP errors (unknown route, wrong method) keep their status;
 anything else is a 500 ``internal_error`` whose message gives nothing away.
 """
@@ -36,6 +36,21 @@ _HTTP_CODES = {
 }
 
 
+class ApiError(Exception):
+    """An error of the api itself (a dependency it fronts is down), not of the domain: same body shape."""
+
+    code: str = "api_error"
+    http_status: int = 503
+
+    def __init__(self, message: str, detail: Any = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.detail = detail
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"code": self.code, "message": self.message, "detail": self.detail}
+
+
 def error_body(code: str, message: str, detail: Any = None) -> dict[str, Any]:
     return {"error": {"code": code, "message": message, "detail": jsonable_encoder(detail)}}
 
@@ -65,7 +80,8 @@ def error_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
 
 def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(StorageError)
-    async def _storage_error(_request: Request, exc: StorageError) -> JSONResponse:
+    @app.exception_handler(ApiError)
+    async def _storage_error(_request: Request, exc: StorageError | ApiError) -> JSONResponse:
         if exc.http_status >= 500:
             log.error("server error: %s", exc.message, exc_info=exc)
         headers = {"WWW-Authenticate": "Bearer"} if isinstance(exc, Unauthorized) else None

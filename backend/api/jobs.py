@@ -10,10 +10,10 @@ from fastapi import APIRouter, Query, Response, status
 from sqlalchemy.orm import Session
 
 from backend.api.deps import Auth, Enqueue, EnqueueDep, Limit, Offset, SessionDep, StoreDep
-from backend.api.errors import error_responses
+from backend.api.errors import ApiError, error_responses
 from backend.api.guard import GuardedRoute
 from backend.api.schemas import JobCreate, JobId, JobOut, Page
-from storage.errors import InvalidInput, StorageError
+from storage.errors import InvalidInput
 from storage.models import JobStatus
 from storage.presets import check_preset
 from storage.repositories import jobs
@@ -25,7 +25,7 @@ log = logging.getLogger("backend.api")
 MAX_CONFIG_CHARS = 64 * 1024
 
 
-class QueueUnavailable(StorageError):
+class QueueUnavailable(ApiError):
     code = "queue_unavailable"
     http_status = 503
 

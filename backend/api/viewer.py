@@ -17,9 +17,8 @@ from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
 from backend.api.deps import SessionDep, SettingsDep
-from backend.api.errors import error_responses
+from backend.api.errors import ApiError, error_responses
 from backend.api.schemas import JobId
-from storage.errors import StorageError
 from storage.repositories import jobs
 from storage.settings import Settings
 
@@ -29,12 +28,12 @@ HUB_TIMEOUT_S = 15.0
 """Opening a run loads its map and starts a viser server: a few seconds for a large map at most."""
 
 
-class ViewerUnavailable(StorageError):
+class ViewerUnavailable(ApiError):
     code = "viewer_unavailable"
     http_status = 503
 
 
-class HubRefused(StorageError):
+class HubRefused(ApiError):
     """The hub answered with an error of its own (e.g. the run has no trajectory yet)."""
 
     def __init__(self, status: int, error: dict) -> None:

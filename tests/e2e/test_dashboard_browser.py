@@ -79,14 +79,14 @@ class Processes:
     def start(self) -> None:
         self.log = open(self.log_path, "wb")
         if _dashboard_in_factory():
-            self._spawn(["-m", "backend.cli.main", "serve"], signal.SIGINT)
+            self._spawn(["-m", "cli.main", "serve"], signal.SIGINT)
             self._wait_api()
         else:
             self._spawn(["-m", "uvicorn", "tests.e2e.test_dashboard_browser:dashboard_app", "--factory",
                          "--host", "127.0.0.1", "--port", str(self.port)], signal.SIGTERM)
             self._wait_api()  # it migrates the database; then the others start
-            self._spawn(["-m", "backend.cli.main", "worker"], signal.SIGTERM)
-            self._spawn(["-m", "backend.cli.main", "viewer"], signal.SIGINT)
+            self._spawn(["-m", "cli.main", "worker"], signal.SIGTERM)
+            self._spawn(["-m", "cli.main", "viewer"], signal.SIGINT)
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
             try:
@@ -158,7 +158,7 @@ def archive(tmp_path_factory: pytest.TempPathFactory) -> Path:
     tmp = tmp_path_factory.mktemp("synth")
     seq = tmp / "synth_walk60"
     env = {k: v for k, v in os.environ.items() if not k.startswith("VTD_") or k.startswith("VTD_TEST_")}
-    subprocess.run([sys.executable, "-m", "backend.cli.main", "synth", str(seq), "--frames", "60", "--people", "1"],
+    subprocess.run([sys.executable, "-m", "cli.main", "synth", str(seq), "--frames", "60", "--people", "1"],
                    cwd=ROOT, env=env, check=True, capture_output=True, timeout=300)
     out = tmp / "synth_walk60.zip"
     with zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as zf:  # PNGs: compressing again gains nothing

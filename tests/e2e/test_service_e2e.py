@@ -50,7 +50,7 @@ class Service:
     def start(self) -> None:
         self.logfh = open(self.log, "wb")
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "backend.cli.main", "serve", "--port", str(self.port), *self.flags],
+            [sys.executable, "-m", "cli.main", "serve", "--port", str(self.port), *self.flags],
             cwd=ROOT, env=self.env, stdout=self.logfh, stderr=subprocess.STDOUT,
         )
         deadline = time.monotonic() + 60

@@ -51,7 +51,7 @@ class Procs:
     def worker(self, env: dict[str, str], *args: str, tag: str = "worker") -> subprocess.Popen[bytes]:
         log = self.logs / f"{tag}-{len(self.all)}.log"
         with open(log, "wb") as fh:  # the child keeps its own descriptor
-            proc = subprocess.Popen([sys.executable, "-m", "backend.cli.main", "worker", *args],
+            proc = subprocess.Popen([sys.executable, "-m", "cli.main", "worker", *args],
                                     cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT)
         self.all.append(proc)
         self.files.append(log)

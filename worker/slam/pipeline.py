@@ -30,10 +30,10 @@ from worker.slam.io.trajectory import Trajectory, write_tum_trajectory
 from worker.slam.mapping.dense import fuse_keyframes
 from worker.slam.mapping.local_mapping import LocalMapper
 from worker.slam.mapping.loop_closure import LoopCloser
-from worker.slam.mapping.map import Map
+from worker.slam.map.map import Map
 from worker.slam.mapping.ply import write_ply
 from worker.slam.tracking.result import TrackResult
-from worker.slam.tracking.se3 import inv, orthonormalize
+from worker.slam.geometry.se3 import inv, orthonormalize
 from worker.slam.tracking.tracker import Tracker
 from worker.slam.truth import Truth, load_truth
 

@@ -10,9 +10,9 @@ from worker.slam.config import MappingConfig, get_preset
 from worker.slam.mapping.dense import fuse_keyframes, voxel_filter
 from worker.slam.mapping.local_ba import local_bundle_adjust
 from worker.slam.mapping.local_mapping import cull_points
-from worker.slam.mapping.map import Map
+from worker.slam.map.map import Map
 from worker.slam.mapping.ply import read_ply, write_ply
-from worker.slam.tracking.se3 import exp_se3, inv, pose_distance
+from worker.slam.geometry.se3 import exp_se3, inv, pose_distance
 from worker.slam.tracking.tracker import Tracker
 
 CAM = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, name="synthetic")

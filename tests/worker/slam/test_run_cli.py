@@ -5,7 +5,7 @@ import json
 
 from typer.testing import CliRunner
 
-from backend.cli.main import app
+from cli.main import app
 from tests.worker.slam.synthetic_room import trajectory, write_sequence
 from worker.slam.errors import CameraError, ConfigError
 

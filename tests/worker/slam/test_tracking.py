@@ -10,9 +10,9 @@ from worker.slam.config import TrackingConfig, get_preset
 from worker.slam.features.types import Features
 from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
 from worker.slam.tracking.motion import ConstantVelocityModel
-from worker.slam.tracking.pnp import pnp_ransac
-from worker.slam.tracking.pose_optimizer import optimize_pose, pose_entropy
-from worker.slam.tracking.se3 import exp_se3, inv, log_se3, pose_distance, transform
+from worker.slam.geometry.pnp import pnp_ransac
+from worker.slam.geometry.pose_optimizer import optimize_pose, pose_entropy
+from worker.slam.geometry.se3 import exp_se3, inv, log_se3, pose_distance, transform
 from worker.slam.tracking.tracker import Tracker
 
 CAM = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, name="synthetic")

@@ -19,7 +19,7 @@ from worker.slam.errors import SequenceFormatError
 from worker.slam.features.types import Features
 from worker.slam.io.sequence import Frame
 from worker.slam.segmentation.base import SegmenterConfig, make_segmenter
-from worker.slam.tracking.se3 import inv
+from worker.slam.geometry.se3 import inv
 from worker.slam.truth import TruthScores
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.slam.mapping.keyframe import KeyFrame
+from worker.slam.map.keyframe import KeyFrame
 
 
 def pixel_rays(K: np.ndarray, dist: np.ndarray | None, shape: tuple[int, int], stride: int) -> np.ndarray:

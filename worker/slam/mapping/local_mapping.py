@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 
 from worker.slam.config import MappingConfig
-from worker.slam.mapping.keyframe import KeyFrame
+from worker.slam.map.keyframe import KeyFrame
 from worker.slam.mapping.local_ba import BAStats, local_bundle_adjust
-from worker.slam.mapping.map import Map
+from worker.slam.map.map import Map
 
 MIN_OBSERVATIONS = 2
 

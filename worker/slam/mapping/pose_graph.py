@@ -11,7 +11,7 @@ import scipy.sparse as sp
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from worker.slam.tracking.se3 import inv
+from worker.slam.geometry.se3 import inv
 
 
 def _exp_batch(x: np.ndarray) -> np.ndarray:

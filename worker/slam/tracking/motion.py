@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.slam.tracking.se3 import inv
+from worker.slam.geometry.se3 import inv
 
 
 class ConstantVelocityModel:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from worker.slam.features.types import Features
-from worker.slam.mapping.keyframe import KeyFrame
+from worker.slam.map.keyframe import KeyFrame
 
 
 @dataclass

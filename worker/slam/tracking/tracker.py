@@ -17,15 +17,15 @@ from worker.slam.features.depth import backproject, lookup_depth
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.search import KeypointIndex
 from worker.slam.features.types import Features
-from worker.slam.mapping.keyframe import KeyFrame
-from worker.slam.mapping.map import Map
+from worker.slam.map.keyframe import KeyFrame
+from worker.slam.map.map import Map
 from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
 from worker.slam.tracking.motion import ConstantVelocityModel
-from worker.slam.tracking.pose_optimizer import PoseEstimate, optimize_pose
+from worker.slam.geometry.pose_optimizer import PoseEstimate, optimize_pose
 from worker.slam.tracking.projection import search_by_projection
 from worker.slam.tracking.relocalization import pnp_against_keyframe, relocalisation_candidates
 from worker.slam.tracking.result import TrackResult
-from worker.slam.tracking.se3 import transform
+from worker.slam.geometry.se3 import transform
 
 MIN_INIT_POINTS = 50
 

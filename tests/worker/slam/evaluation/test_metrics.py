@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
-from backend.cli.main import app
+from cli.main import app
 from worker.slam.errors import EvaluationError, TrajectoryFormatError
 from worker.slam.evaluation.metrics import evaluate
 from worker.slam.io.trajectory import Trajectory, read_tum_trajectory, write_tum_trajectory
@@ -89,7 +89,7 @@ def test_bad_trajectory_line(tmp_path):
 
 
 def test_cli_bad_input_exit_code(tmp_path, capsys):
-    from backend.cli.errors import run_with_error_mapping
+    from cli.errors import run_with_error_mapping
     import sys
     (tmp_path / "t.txt").write_text("garbage\n")
     old = sys.argv

@@ -96,8 +96,8 @@ def test_fine_tuning_starts_from_the_given_weights(tmp_path: Path) -> None:
 
 
 def test_cli_rejects_fine_tuning_without_weights(tmp_path: Path, capsys, monkeypatch) -> None:
-    from backend.cli.errors import run_with_error_mapping
-    from backend.cli.main import app
+    from cli.errors import run_with_error_mapping
+    from cli.main import app
 
     monkeypatch.setattr("sys.argv", ["vtdslam", "train-msnet", "--config", "cpu-tum-ft", "--out", str(tmp_path)])
     assert run_with_error_mapping(app) == 2

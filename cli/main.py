@@ -5,7 +5,7 @@ import sys
 
 import typer
 
-from backend.cli import augment_cmd, demo_cmd, eval_cmd, inspect_cmd, msnet_cmd, run_cmd, serve_cmd, synth_cmd, \
+from cli import augment_cmd, demo_cmd, eval_cmd, inspect_cmd, msnet_cmd, run_cmd, serve_cmd, synth_cmd, \
     viewer_cmd, worker_cmd
 
 app = typer.Typer(
@@ -22,7 +22,7 @@ for module in (augment_cmd, demo_cmd, eval_cmd, inspect_cmd, msnet_cmd, run_cmd,
 
 def main() -> None:
     """Run the CLI; domain errors become a one-line message and exit code 2 (bad input) instead of a trace."""
-    from backend.cli.errors import run_with_error_mapping
+    from cli.errors import run_with_error_mapping
 
     sys.exit(run_with_error_mapping(app))
 

@@ -6,7 +6,7 @@ import json
 import numpy as np
 from typer.testing import CliRunner
 
-from backend.cli.main import app
+from cli.main import app
 from tests.worker.slam.test_augment import make_coco
 from worker.slam.errors import ConfigError
 from worker.slam.io.sequence import Sequence

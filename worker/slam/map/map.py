@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.slam.mapping.keyframe import KeyFrame
-from worker.slam.mapping.map_points import MapPoints
+from worker.slam.map.keyframe import KeyFrame
+from worker.slam.map.map_points import MapPoints
 
 
 class Map:

@@ -4,7 +4,7 @@ import json
 import pytest
 from typer.testing import CliRunner
 
-from backend.cli.main import app
+from cli.main import app
 
 
 def test_guided_radius_must_not_be_negative():

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from worker.slam.tracking import reprojection as rp
-from worker.slam.tracking.se3 import exp_se3, inv, orthonormalize
+from worker.slam.geometry import reprojection as rp
+from worker.slam.geometry.se3 import exp_se3, inv, orthonormalize
 
 CHI2_STEREO, CHI2_MONO = 7.815, 5.991
 

@@ -38,9 +38,9 @@ def serve_command(
                  "--host", host or settings.host, "--port", str(port or settings.port)], signal.SIGTERM),
     }
     if worker:
-        commands["worker"] = ([sys.executable, "-m", "backend.cli.main", "worker"], signal.SIGTERM)
+        commands["worker"] = ([sys.executable, "-m", "cli.main", "worker"], signal.SIGTERM)
     if viewer:
-        commands["viewer"] = ([sys.executable, "-m", "backend.cli.main", "viewer"], signal.SIGINT)
+        commands["viewer"] = ([sys.executable, "-m", "cli.main", "viewer"], signal.SIGINT)
     raise typer.Exit(supervise(commands))
 
 

@@ -2,7 +2,7 @@ import json
 
 from typer.testing import CliRunner
 
-from backend.cli.main import app
+from cli.main import app
 
 
 def test_inspect_redkitchen(redkitchen):

@@ -1,0 +1,1 @@
+"""The map model: keyframes, map points and the map that holds them."""
