@@ -213,12 +213,12 @@ def feature_precision_recall(removed: np.ndarray, kept: np.ndarray, truth_mask: 
     `border_px` > 0 also counts a removed keypoint within that distance of the mask as correct: ORB corners sit
     on silhouettes, and a keypoint whose patch straddles a moving object is unstable wherever its centre falls.
     Recall is always over keypoints on the mask itself."""
-    near = truth_mask
+    near: np.ndarray = truth_mask
     if border_px > 0:
         import cv2
 
-        k = 2 * border_px + 1
-        near = cv2.dilate(truth_mask.astype(np.uint8), np.ones((k, k), np.uint8)) > 0
+        size = 2 * border_px + 1
+        near = cv2.dilate(truth_mask.astype(np.uint8), np.ones((size, size), np.uint8)) > 0
     r, k = _on_mask(removed, near), _on_mask(kept, truth_mask)
     tp, fp, fn = int(r.sum()), int((~r).sum()), int(k.sum())
     precision = tp / (tp + fp) if tp + fp else 1.0

@@ -60,7 +60,7 @@ def composite(rgb: np.ndarray, depth_u16: np.ndarray, ids: np.ndarray, camera: C
     if c0 >= c1 or r0 >= r1:
         return 0
     sh, sw = person.sprite.mask.shape
-    src = np.float32([[0, 0], [sw, 0], [sw, sh], [0, sh]])
+    src = np.array([[0, 0], [sw, 0], [sw, sh], [0, sh]], np.float32)
     H = cv2.getPerspectiveTransform(src, (uv - [c0, r0]).astype(np.float32))
     size = (c1 - c0, r1 - r0)
     # Fractional coverage of the warped silhouette: > 0.5 is the person (mask), below 1 its edge is blended.

@@ -99,7 +99,9 @@ class AugmentedSequence:
     def frame(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(RGB uint8 (H,W,3), raw uint16 depth (H,W) in the source's units, uint8 ids (H,W)) of frame `i`."""
         rgb = self.seq[i].rgb.copy()
-        depth = cv2.imread(str(self.seq.frames[i].depth_path), cv2.IMREAD_UNCHANGED).copy()
+        depth = cv2.imread(str(self.seq.frames[i].depth_path), cv2.IMREAD_UNCHANGED)
+        if depth is None:
+            raise SequenceFormatError(f"cannot read depth image {self.seq.frames[i].depth_path.name}")
         ids = np.zeros(depth.shape, np.uint8)
         T = self.poses[i]
         active = [w for w in self.walks if w.first <= i <= w.last]

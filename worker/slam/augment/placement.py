@@ -80,8 +80,8 @@ def plan_walks(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera
             first, last = frame, frame + length
             a, b = max(first, 0), min(last, n - 1)
             if b - a >= min(fps, n // 2):  # skip slivers at the ends of the sequence
-                mid_depth = center_depth[a:b + 1]
-                mid_depth = float(np.median(mid_depth[mid_depth > 0])) if (mid_depth > 0).any() else fallback
+                span = center_depth[a:b + 1]
+                mid_depth = float(np.median(span[span > 0])) if (span > 0).any() else fallback
                 dist = float(np.clip(rng.uniform(*cfg.depth_fraction) * mid_depth, *cfg.distance_m))
                 side = 1.0 if rng.random() < 0.5 else -1.0
                 off = cfg.overshoot * half_fov * dist

@@ -22,15 +22,12 @@ def match_ratio(desc_q: np.ndarray, desc_t: np.ndarray, ratio: float = 0.8,
     if len(desc_q) < 2 or len(desc_t) < 2:
         return np.zeros(0, int), np.zeros(0, int)
     knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(desc_q, desc_t, k=2)
-    q, t, d = [], [], []
-    for m in knn:
-        if len(m) == 2 and m[0].distance <= max_dist and m[0].distance < ratio * m[1].distance:
-            q.append(m[0].queryIdx)
-            t.append(m[0].trainIdx)
-            d.append(m[0].distance)
-    if not q:
+    good = [m[0] for m in knn if len(m) == 2 and m[0].distance <= max_dist and m[0].distance < ratio * m[1].distance]
+    if not good:
         return np.zeros(0, int), np.zeros(0, int)
-    q, t, d = np.array(q), np.array(t), np.array(d)
+    q = np.array([m.queryIdx for m in good])
+    t = np.array([m.trainIdx for m in good])
+    d = np.array([m.distance for m in good])
     order = np.argsort(d)
     _, first = np.unique(t[order], return_index=True)  # keep the closest query per target
     keep = order[first]

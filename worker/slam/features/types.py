@@ -49,5 +49,5 @@ class Features:
         raw = None
         if any(p.uv_raw is not None for p in parts):
             raw = np.concatenate([p.image_uv for p in parts])
-        return Features(*(np.concatenate([getattr(p, f) for p in parts]) for f in
-                          ("uv", "octave", "response", "desc", "depth")), uv_raw=raw)
+        cat = {f: np.concatenate([getattr(p, f) for p in parts]) for f in ("uv", "octave", "response", "desc", "depth")}
+        return Features(**cat, uv_raw=raw)

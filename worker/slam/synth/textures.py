@@ -39,7 +39,8 @@ def _noise(rng: np.random.Generator, h: int, w: int, scale: int) -> np.ndarray:
 
 
 def _colour(rng: np.random.Generator, lo: int = 20, hi: int = 235) -> tuple[int, int, int]:
-    return tuple(int(v) for v in rng.integers(lo, hi, 3))
+    r, g, b = (int(v) for v in rng.integers(lo, hi, 3))
+    return r, g, b
 
 
 def busy_texture(rng: np.random.Generator, h: int, w: int, base: tuple[int, int, int], density: float = 1.0,

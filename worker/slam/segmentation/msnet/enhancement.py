@@ -45,7 +45,7 @@ class ClassQueryDecoder(nn.Module):
     def forward(self, feat: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """feat (B, D, h, w) -> class logits (B, M, M) and mask embeddings (B, M, D)."""
         b = feat.shape[0]
-        memory = (feat + resize_pos_embed(self.pos, feat.shape[-2:])).flatten(2).transpose(1, 2)
+        memory = (feat + resize_pos_embed(self.pos, (feat.shape[-2], feat.shape[-1]))).flatten(2).transpose(1, 2)
         q = self.decoder(self.queries.expand(b, -1, -1), memory)
         return self.class_head(q), self.mask_head(q)
 

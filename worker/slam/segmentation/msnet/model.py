@@ -27,6 +27,9 @@ class MsnetOutput(NamedTuple):
 class MSNet(nn.Module):
     """Input: normalised RGB (B, 3, H, W), H and W multiples of 32. Output: `MsnetOutput`."""
 
+    mean: torch.Tensor  # (1, 3, 1, 1) buffers, registered in __init__
+    std: torch.Tensor
+
     def __init__(self, cfg: MsnetConfig) -> None:
         super().__init__()
         self.cfg = cfg

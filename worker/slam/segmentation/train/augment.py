@@ -92,7 +92,7 @@ def paste(rng: np.random.Generator, rgb: np.ndarray, hard: np.ndarray, soft: np.
     region = rgb[ya:yb, xa:xb].astype(np.float32)
     src = crgb[sub].astype(np.float32)
     if rng.random() < 0.7:  # soften like the background's camera, so sharpness is no cue for "pasted"
-        src = cv2.GaussianBlur(src, (0, 0), rng.uniform(0.5, 1.5))
+        src = cv2.GaussianBlur(src, (0, 0), rng.uniform(0.5, 1.5)).astype(np.float32, copy=False)
     src = match_colours(rng, src, cmask[sub] > 0.5, rgb.astype(np.float32))
     rgb[ya:yb, xa:xb] = np.clip(a * src + (1 - a) * region, 0, 255).astype(np.uint8)
     inside = cmask[sub] > 0.5

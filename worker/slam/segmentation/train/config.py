@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
+from typing import Any
 
 from worker.slam.errors import ConfigError
 from worker.slam.segmentation.msnet.config import MsnetConfig
@@ -124,7 +125,7 @@ def _from_dict(base: TrainConfig, data: dict) -> TrainConfig:
     unknown = set(data) - known - {"preset"}
     if unknown:
         raise ConfigError(f"unknown training config keys: {sorted(unknown)}")
-    values = {}
+    values: dict[str, Any] = {}
     for k, v in data.items():
         if k == "preset":
             continue

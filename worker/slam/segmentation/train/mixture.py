@@ -60,6 +60,7 @@ class MixtureDataset(Dataset):
 
     def _target(self, rng: np.random.Generator):
         """A target-domain frame with the teacher's labels (people kept): soft everywhere, hard where confident."""
+        assert self.targets is not None, "called only when target-domain frames were given"
         k = int(rng.integers(len(self.targets.images)))
         rgb = read_rgb(self.targets.images[k])
         a = random_affine(rng, rgb.shape[:2], self.out_hw, self.cfg.target_scale)
@@ -75,6 +76,7 @@ class MixtureDataset(Dataset):
     def _composite(self, rng: np.random.Generator):
         on_target = self.targets is not None and rng.random() < self.cfg.p_target_background
         source = self.targets if on_target else self.backgrounds
+        assert source is not None, "backgrounds are always given"
         k = int(rng.integers(len(source.images)))
         rgb = read_rgb(source.images[k])
         a = random_affine(rng, rgb.shape[:2], self.out_hw, (1.0, 1.5))

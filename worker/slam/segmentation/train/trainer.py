@@ -7,6 +7,7 @@ import time
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
+from typing import cast
 
 import cv2
 import numpy as np
@@ -157,10 +158,10 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         n = 0
         bar = tqdm(loader, desc=f"epoch {epoch + 1}/{cfg.epochs}", disable=not progress, unit="batch")
         for n, batch in enumerate(bar, 1):
-            progress = progress_of(step, total_steps, elapsed + time.time() - t0, cfg.time_budget_min)
-            if progress >= 1.0:
+            done = progress_of(step, total_steps, elapsed + time.time() - t0, cfg.time_budget_min)
+            if done >= 1.0:
                 break
-            lr = cfg.lr * lr_factor(progress, cfg.warmup_fraction)
+            lr = cfg.lr * lr_factor(done, cfg.warmup_fraction)
             for group in opt.param_groups:
                 group["lr"] = lr
             step += 1
@@ -179,7 +180,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         elapsed += time.time() - t0
         record = {"epoch": epoch + 1, "step": step, "lr": opt.param_groups[0]["lr"], "elapsed_s": round(elapsed, 1),
                   **{k: v / max(n, 1) for k, v in sums.items()}}
-        final = ema.module if ema is not None else model
+        final = cast(MSNet, ema.module if ema is not None else model)
         record.update(evaluate_all(final, data, device))
         with open(out / "metrics.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
@@ -193,8 +194,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         save_model(out / f"epoch{epoch + 1:03d}.pt", final, meta)  # for later inspection and selection
         if progress_of(step, total_steps, elapsed, cfg.time_budget_min) >= 1.0:
             break
-    weights = {"ema": ema.module, "raw": model} if ema is not None else {"raw": model}
-    finish(cfg, weights, data, device, out, {"train_config": cfg.to_dict(), "train_seconds": round(elapsed, 1),
+    finals = {"ema": cast(MSNet, ema.module), "raw": model} if ema is not None else {"raw": model}
+    finish(cfg, finals, data, device, out, {"train_config": cfg.to_dict(), "train_seconds": round(elapsed, 1),
                                              "epoch": state_epoch(out)})
     return out / "msnet.pt"
 
