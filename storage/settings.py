@@ -5,6 +5,8 @@ Built by :func:`get_settings`, never at import time, so tests and processes each
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 from pathlib import Path
 from typing import Any
 
@@ -41,9 +43,22 @@ class Settings(BaseSettings):
     max_ratio: float = Field(default=200.0, gt=0)
     """Largest unpacked/packed size ratio accepted for an archive (zip-bomb guard)."""
 
+    db_pool_size: int = Field(default=10, ge=1, le=1000)
+    db_max_overflow: int = Field(default=30, ge=0, le=1000)
+    """Connections a process may open beyond ``db_pool_size`` under load. The api runs its sync handlers
+    on anyio's thread pool (40 threads) and each holds one session for its duration, so 10 + 30 lets
+    every thread get a connection without waiting; event streams hold none while they wait. N api
+    processes need N x 40 of the database's ``max_connections`` (PostgreSQL's default is 100)."""
+    max_streams_per_client: int = Field(default=16, ge=1, le=10_000)
+    """Open ``GET /jobs/{id}/events`` streams one client address may hold (429 beyond)."""
+
     host: str = "127.0.0.1"
+    """Address every server of the service binds: the api, the viewer hub and its per-run viser servers
+    (the latter on loopback when ``api_token`` is set: browsers reach them through the api's ``/viewer/``)."""
     port: int = Field(default=8000, ge=1, le=65535)
+    """The api's port: the only one a browser needs (the viewer is proxied under ``/viewer/{job_id}/``)."""
     viewer_port: int = Field(default=8080, ge=1, le=65535)
+    """The viewer hub's control port, used by the api only."""
     heartbeat_timeout_s: float = Field(default=120.0, gt=0)
     """A running job whose worker has not reported for this long is failed (workers check every 1/4 of it)."""
     requeue_orphans: int = Field(default=0, ge=0)
@@ -53,6 +68,16 @@ class Settings(BaseSettings):
         # URLs keep their shape in logs and reprs, never their passwords
         for name, value in super().__repr_args__():
             yield name, mask_url(value) if name in _URL_FIELDS and isinstance(value, str) else value
+
+    @property
+    def viewer_hub_key(self) -> str | None:
+        """The secret the api sends the viewer hub when ``api_token`` is set (None: the hub asks for none).
+
+        Derived from the token (HMAC-SHA256), so both processes share it without another setting and the
+        token itself never travels to the hub."""
+        if not self.api_token:
+            return None
+        return hmac.new(self.api_token.encode(), b"vtdslam viewer hub", hashlib.sha256).hexdigest()
 
     @property
     def resolved_database_url(self) -> str:

@@ -14,7 +14,7 @@ from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
 
 import webui
-from backend.api import viewer
+from backend.api import viewer, viewer_proxy
 from storage.presets import CAMERA_PRESETS, PIPELINE_PRESETS
 
 WEBUI_DIR = Path(webui.__file__).resolve().parent
@@ -60,10 +60,12 @@ def batch_page(request: Request, batch_id: str) -> HTMLResponse:
 
 
 def include_dashboard(app: FastAPI, api_prefix: str = "/api/v1") -> None:
-    """Add the dashboard pages, ``GET {api_prefix}/jobs/{id}/viewer`` and ``/static`` (once per app)."""
+    """Add the dashboard pages, ``GET {api_prefix}/jobs/{id}/viewer``, the ``/viewer/`` proxy and ``/static``
+    (once per app)."""
     if getattr(app.state, "dashboard_included", False):
         return
     app.include_router(viewer.router, prefix=api_prefix)
+    app.include_router(viewer_proxy.router)  # each run's scene under /viewer/{job_id}/ on this origin
     app.include_router(router)
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     app.state.dashboard_included = True

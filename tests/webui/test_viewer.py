@@ -1,15 +1,24 @@
 import json
+import socket
 import threading
+import urllib.error
 import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import cv2
 import numpy as np
 import pytest
+from fastapi.testclient import TestClient
 
+from backend.api.pages import include_dashboard
+from backend.app import create_app
 from storage.artifacts import ArtifactStore
 from storage.errors import NotFound
-from webui.viewer.hub import HubConfig, ViewerHub, serve_hub
-from webui.viewer.run_data import load_run, read_ply
+from storage.settings import get_settings
+from tests.backend.api.data import tar_gz, write_sequence
+from webui.viewer.hub import KEY_HEADER, HubConfig, ViewerHub, serve_hub
+from webui.viewer.run_data import load_run
 from webui.viewer.scene import error_colors
 
 
@@ -62,9 +71,9 @@ def test_hub_serves_a_run_and_reuses_its_server(tmp_path):
     write_run(store.job_dir("b" * 32), with_extras=False)
     hub = ViewerHub(store, HubConfig(port=0, max_servers=1))
     try:
-        port = hub.open_run("a" * 32)
-        assert hub.open_run("a" * 32) == port
-        page = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10).read()
+        run = hub.open_run("a" * 32)
+        assert hub.open_run("a" * 32) == run
+        page = urllib.request.urlopen(f"http://127.0.0.1:{run.port}/", timeout=10).read()
         assert b"<html" in page.lower()
         hub.open_run("b" * 32)  # capacity 1: the idle server of run a is stopped
         assert hub.runs() == ["b" * 32]
@@ -74,31 +83,161 @@ def test_hub_serves_a_run_and_reuses_its_server(tmp_path):
         hub.stop()
 
 
-def test_hub_control_api(tmp_path):
-    import socket
+def _refused(host: str, port: int) -> bool:
+    try:
+        socket.create_connection((host, port), timeout=2).close()
+    except ConnectionRefusedError:
+        return True
+    return False
 
+
+def test_run_servers_bind_the_hubs_host(tmp_path):
+    """One host setting for every server: a run server on 127.0.0.2 is not on 127.0.0.1 (and vice versa)."""
     store = ArtifactStore(tmp_path)
-    write_run(store.job_dir("a" * 32))
+    write_run(store.job_dir("a" * 32), with_extras=False)
+    hub = ViewerHub(store, HubConfig(host="127.0.0.2", port=0))
+    try:
+        run = hub.open_run("a" * 32)
+        assert run.host == "127.0.0.2"
+        assert b"<html" in urllib.request.urlopen(f"http://127.0.0.2:{run.port}/", timeout=10).read().lower()
+        assert _refused("127.0.0.1", run.port)
+    finally:
+        hub.stop()
+
+
+def test_with_a_key_run_servers_bind_loopback_only(tmp_path):
+    """viser has no auth: with a token set its servers are reachable only through the api's proxy."""
+    store = ArtifactStore(tmp_path)
+    write_run(store.job_dir("a" * 32), with_extras=False)
+    hub = ViewerHub(store, HubConfig(host="127.0.0.2", port=0, key="secret"))
+    try:
+        run = hub.open_run("a" * 32)
+        assert run.host == "127.0.0.1"
+        assert _refused("127.0.0.2", run.port)
+    finally:
+        hub.stop()
+
+
+@contextmanager
+def running_hub(store: ArtifactStore, key: str | None = None) -> Iterator[int]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    hub = ViewerHub(store, HubConfig(port=port))
+    hub = ViewerHub(store, HubConfig(port=port, key=key))
     stop = threading.Event()
     thread = threading.Thread(target=serve_hub, args=(hub, stop), daemon=True)
     thread.start()
     try:
         for _ in range(50):
             try:
-                health = json.loads(urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=2).read())
+                urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=2).close()
                 break
             except OSError:
                 threading.Event().wait(0.1)
-        assert health["status"] == "ok"
-        run = json.loads(urllib.request.urlopen(f"http://127.0.0.1:{port}/runs/{'a' * 32}", timeout=10).read())
-        assert run["port"] > 0
-        with pytest.raises(urllib.error.HTTPError) as err:
-            urllib.request.urlopen(f"http://127.0.0.1:{port}/runs/{'c' * 32}", timeout=10)
-        assert err.value.code == 404
+        yield port
     finally:
         stop.set()
         thread.join(5)
+
+
+def _get(url: str, headers: dict[str, str] | None = None) -> tuple[int, dict, dict]:
+    try:
+        with urllib.request.urlopen(urllib.request.Request(url, headers=headers or {}), timeout=10) as resp:
+            return resp.status, dict(resp.headers), json.loads(resp.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code, dict(exc.headers), json.loads(exc.read())
+
+
+def test_hub_control_api(tmp_path):
+    store = ArtifactStore(tmp_path)
+    write_run(store.job_dir("a" * 32))
+    with running_hub(store) as port:
+        status, headers, run = _get(f"http://127.0.0.1:{port}/runs/{'a' * 32}")
+        assert status == 200 and run["port"] > 0 and run["host"] == "127.0.0.1"
+        status, headers, health = _get(f"http://127.0.0.1:{port}/health")
+        # no run ids for anyone who asks, and no CORS header: browsers never call the hub
+        assert status == 200 and health == {"status": "ok"}
+        assert "access-control-allow-origin" not in {k.lower() for k in headers}
+        status, _, body = _get(f"http://127.0.0.1:{port}/runs/{'c' * 32}")
+        assert status == 404 and body["error"]["code"] == "not_found"
+
+
+def test_hub_with_a_key_opens_runs_for_the_key_only(tmp_path):
+    store = ArtifactStore(tmp_path)
+    write_run(store.job_dir("a" * 32), with_extras=False)
+    with running_hub(store, key="k" * 64) as port:
+        url = f"http://127.0.0.1:{port}/runs/{'a' * 32}"
+        assert _get(url)[0] == 403
+        assert _get(url, {KEY_HEADER: "wrong"})[0] == 403
+        status, _, run = _get(url, {KEY_HEADER: "k" * 64})
+        assert status == 200 and run["port"] > 0
+
+
+# ---------- the api's same-origin proxy, against a real hub and viser ----------
+
+@pytest.fixture
+def seq_tgz(tmp_path_factory: pytest.TempPathFactory) -> bytes:
+    folder = write_sequence(tmp_path_factory.mktemp("seq") / "rgbd_dataset_view", n=3)
+    return tar_gz(folder, tmp_path_factory.mktemp("arch") / "seq.tgz", top="rgbd_dataset_view").read_bytes()
+
+
+@contextmanager
+def proxied_run(tmp_path, seq_tgz: bytes, token: str | None = None) -> Iterator[tuple[TestClient, str]]:
+    """An api (TestClient) in front of a real hub, with one job whose run artifacts exist."""
+    settings = get_settings(data_dir=tmp_path / "data", api_token=token)
+    store = ArtifactStore(settings.data_dir)
+    with running_hub(store, settings.viewer_hub_key) as hub_port:
+        app = create_app(settings.model_copy(update={"viewer_port": hub_port}), enqueue=lambda job_id: None)
+        include_dashboard(app)
+        auth = {"Authorization": f"Bearer {token}"} if token else {}
+        with TestClient(app) as client:
+            r = client.post("/api/v1/sequences", files={"file": ("s.tgz", seq_tgz, "application/gzip")},
+                            data={"camera": "tum1"}, headers=auth)
+            assert r.status_code == 201, r.text
+            r = client.post("/api/v1/jobs", json={"sequence_id": r.json()["id"], "preset": "orb-only"}, headers=auth)
+            assert r.status_code == 201, r.text
+            job_id = r.json()["id"]
+            write_run(store.job_dir(job_id))
+            yield client, job_id
+
+
+@pytest.mark.parametrize("token", [None, "t0ken"])
+def test_the_api_serves_the_runs_viewer_on_its_own_origin(tmp_path, seq_tgz, token):
+    import viser
+
+    with proxied_run(tmp_path, seq_tgz, token) as (client, job_id):
+        r = client.get(f"/api/v1/jobs/{job_id}/viewer")
+        assert r.status_code == 200 and r.json() == {"url": f"/viewer/{job_id}/"}
+        page = client.get(f"/viewer/{job_id}/")
+        assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
+        assert b"<html" in page.content.lower()
+        assert client.get(f"/viewer/{job_id}/no-such-asset.js").status_code == 404  # viser's own answer
+        r = client.get(f"/viewer/{job_id}", follow_redirects=False)
+        assert r.status_code == 307 and r.headers["location"] == f"/viewer/{job_id}/"
+        # the scene's socket is on the page's URL without the slash, as viser's client opens it
+        protocol = f"viser-v{viser.__version__}"
+        with client.websocket_connect(f"/viewer/{job_id}", subprotocols=[protocol]) as ws:
+            assert ws.accepted_subprotocol == protocol
+            assert len(ws.receive_bytes()) > 16  # viser's framed, compressed scene messages
+
+
+def test_viewer_socket_from_another_site_is_refused(tmp_path, seq_tgz):
+    import viser
+    from starlette.websockets import WebSocketDisconnect
+
+    protocol = [f"viser-v{viser.__version__}"]
+    with proxied_run(tmp_path, seq_tgz) as (client, job_id):
+        with pytest.raises(WebSocketDisconnect) as closed:
+            with client.websocket_connect(f"/viewer/{job_id}", subprotocols=protocol,
+                                          headers={"origin": "http://evil.example"}) as ws:
+                ws.receive_bytes()
+        assert closed.value.code == 1008
+        with client.websocket_connect(f"/viewer/{job_id}", subprotocols=protocol,
+                                      headers={"origin": "http://testserver"}) as ws:
+            assert len(ws.receive_bytes()) > 16
+
+
+def test_viewer_of_an_unknown_job_is_404_through_the_proxy(tmp_path, seq_tgz):
+    with proxied_run(tmp_path, seq_tgz) as (client, _):
+        r = client.get(f"/viewer/{'f' * 32}/")
+        assert r.status_code == 404 and r.json()["error"]["code"] == "not_found"

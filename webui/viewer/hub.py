@@ -2,63 +2,101 @@
 
 viser serves one scene per server (clients can't say which run they want), so the hub starts a server per
 run on an ephemeral port when asked, keeps at most `max_servers` (least recently opened ones with no
-connected clients are stopped first) and answers a tiny JSON control API on the viewer port:
+connected clients are stopped first) and answers a tiny JSON control API on the viewer port, for the api
+only (browsers reach a run's scene through the api's same-origin proxy, ``/viewer/{job_id}/``):
 
-    GET /health              → {"status": "ok", "runs": [...]}
-    GET /runs/{job_id}       → {"job_id": ..., "port": 40123}   (starts the run's server if needed)
+    GET /health              → {"status": "ok"}                    (no run ids: they are not public)
+    GET /runs/{job_id}       → {"job_id": ..., "host": "127.0.0.1", "port": 40123}   (starts the server)
+
+When a key is set (the api has a token), ``/runs`` needs it in the ``X-VTD-Hub-Key`` header and the run
+servers bind loopback: viser has no auth of its own, so they are then reachable only through the api.
 """
 from __future__ import annotations
 
+import hmac
 import json
 import logging
 import sys
 import threading
 import time
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import TYPE_CHECKING, Any
 
 from storage.artifacts import ArtifactStore
 from storage.errors import StorageError
 from webui.viewer.run_data import load_run
 from webui.viewer.scene import build_scene
 
+if TYPE_CHECKING:
+    import viser
+
 log = logging.getLogger(__name__)
+
+KEY_HEADER = "X-VTD-Hub-Key"
+"""The header carrying the hub key (``Settings.viewer_hub_key``) from the api to the hub."""
+CLIENT_TIMEOUT_S = 10.0
+"""A control client that sends nothing for this long is dropped (a slow client never holds a thread)."""
+_WILDCARDS = {"0.0.0.0": "127.0.0.1", "": "127.0.0.1", "::": "::1"}
+
+
+def reachable_host(bind_host: str) -> str:
+    """The address a local client dials for a server bound to ``bind_host`` (a wildcard means loopback)."""
+    return _WILDCARDS.get(bind_host, bind_host)
 
 
 @dataclass(frozen=True)
 class HubConfig:
     host: str = "127.0.0.1"
-    """Address the run servers and the control API bind to."""
+    """Address the control API and (without a key) the run servers bind to."""
     port: int = 8080
     """Control API port."""
     max_servers: int = 6
     """Run servers kept alive at once."""
+    key: str | None = field(default=None, repr=False)
+    """When set: the secret ``/runs`` requires, and the run servers bind loopback."""
+
+    @property
+    def run_host(self) -> str:
+        """Where the per-run viser servers bind."""
+        return "127.0.0.1" if self.key else self.host
+
+
+@dataclass(frozen=True)
+class RunServer:
+    """Where one run's viser server answers (HTTP for its page, WebSocket for its scene)."""
+
+    host: str
+    port: int
 
 
 class ViewerHub:
     def __init__(self, store: ArtifactStore, config: HubConfig = HubConfig()) -> None:
         self.store = store
         self.config = config
-        self._servers: OrderedDict[str, object] = OrderedDict()
+        self._servers: OrderedDict[str, viser.ViserServer] = OrderedDict()
         self._lock = threading.Lock()
 
-    def open_run(self, job_id: str) -> int:
-        """Port of the run's viser server, started on first use."""
+    def open_run(self, job_id: str) -> RunServer:
+        """The run's viser server, started on first use."""
         import viser
 
         with self._lock:
             if job_id in self._servers:
                 self._servers.move_to_end(job_id)
-                return self._servers[job_id].get_port()
+                return self._address(self._servers[job_id])
             data = load_run(self.store.job_dir(job_id))  # NotFound if the run has no trajectory
             self._evict()
-            server = viser.ViserServer(host=self.config.host, port=0, label=f"VTD-SLAM run {job_id[:8]}",
+            server = viser.ViserServer(host=self.config.run_host, port=0, label=f"VTD-SLAM run {job_id[:8]}",
                                        verbose=False)
             build_scene(server, data, f"Run {job_id[:8]}")
             self._servers[job_id] = server
-            log.info("viewer for run %s on port %d", job_id, server.get_port())
-            return server.get_port()
+            log.info("viewer for run %s on %s:%d", job_id, self.config.run_host, server.get_port())
+            return self._address(server)
+
+    def _address(self, server: viser.ViserServer) -> RunServer:
+        return RunServer(reachable_host(self.config.run_host), server.get_port())
 
     def _evict(self) -> None:
         while len(self._servers) >= self.config.max_servers:
@@ -81,38 +119,55 @@ class QuietHTTPServer(ThreadingHTTPServer):
     """A threading HTTP server whose clients may hang up early (the api times out its hub calls):
     a broken pipe is logged at debug level instead of a traceback on stderr."""
 
-    def handle_error(self, request, client_address) -> None:  # noqa: ANN001 (socketserver's signature)
+    daemon_threads = True
+
+    def handle_error(self, request: Any, client_address: Any) -> None:  # socketserver's signature
         exc = sys.exc_info()[1]
-        if isinstance(exc, ConnectionError):
-            log.debug("client %s hung up: %s", client_address, exc)
+        if isinstance(exc, (ConnectionError, TimeoutError)):
+            log.debug("client %s hung up or timed out: %s", client_address, exc)
         else:
             log.exception("error while answering %s", client_address)
 
 
 def _handler(hub: ViewerHub) -> type[BaseHTTPRequestHandler]:
     class Handler(BaseHTTPRequestHandler):
-        def _send(self, status: int, body: dict) -> None:
+        timeout = CLIENT_TIMEOUT_S  # socket timeout for every read: slow clients are dropped
+
+        def _send(self, status: int, body: dict[str, Any]) -> None:
             payload = json.dumps(body).encode()
             self.send_response(status)
             self.send_header("Content-Type", "application/json")
             self.send_header("Content-Length", str(len(payload)))
-            self.send_header("Access-Control-Allow-Origin", "*")
-            self.end_headers()
+            self.send_header("Cache-Control", "no-store")
+            self.end_headers()  # no CORS header: browsers never call the hub, the api does
             self.wfile.write(payload)
+
+        def _error(self, status: int, code: str, message: str) -> None:
+            self._send(status, {"error": {"code": code, "message": message, "detail": {}}})
+
+        def _authorised(self) -> bool:
+            key = hub.config.key
+            if not key:
+                return True
+            given = self.headers.get(KEY_HEADER) or ""
+            return hmac.compare_digest(given.encode(), key.encode())
 
         def do_GET(self) -> None:  # noqa: N802 (http.server's naming)
             parts = [p for p in self.path.split("?")[0].split("/") if p]
             if parts == ["health"]:
-                return self._send(200, {"status": "ok", "runs": hub.runs()})
+                return self._send(200, {"status": "ok"})
             if len(parts) == 2 and parts[0] == "runs":
+                if not self._authorised():
+                    return self._error(403, "forbidden", "the viewer hub answers the api only")
                 try:
-                    return self._send(200, {"job_id": parts[1], "port": hub.open_run(parts[1])})
+                    run = hub.open_run(parts[1])
                 except StorageError as exc:
                     return self._send(exc.http_status, {"error": exc.to_dict()})
-            self._send(404, {"error": {"code": "not_found", "message": "no such path", "detail": {}}})
+                return self._send(200, {"job_id": parts[1], "host": run.host, "port": run.port})
+            self._error(404, "not_found", "no such path")
 
-        def log_message(self, fmt: str, *args) -> None:
-            log.debug(fmt, *args)
+        def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 (http.server's naming)
+            log.debug(format, *args)
 
     return Handler
 
@@ -122,7 +177,8 @@ def serve_hub(hub: ViewerHub, stop: threading.Event | None = None) -> None:
     httpd = QuietHTTPServer((hub.config.host, hub.config.port), _handler(hub))
     thread = threading.Thread(target=httpd.serve_forever, daemon=True)
     thread.start()
-    log.info("viewer hub on http://%s:%d", hub.config.host, hub.config.port)
+    log.info("viewer hub on http://%s:%d (run servers on %s%s)", hub.config.host, hub.config.port,
+             hub.config.run_host, ", key required" if hub.config.key else "")
     try:
         while stop is None or not stop.is_set():
             time.sleep(0.2)
@@ -131,4 +187,4 @@ def serve_hub(hub: ViewerHub, stop: threading.Event | None = None) -> None:
         hub.stop()
 
 
-__all__ = ["HubConfig", "QuietHTTPServer", "ViewerHub", "serve_hub"]
+__all__ = ["KEY_HEADER", "HubConfig", "QuietHTTPServer", "RunServer", "ViewerHub", "reachable_host", "serve_hub"]

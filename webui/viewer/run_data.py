@@ -65,7 +65,7 @@ def read_ply(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
             raise NotFound(f"{path.name}: only binary little-endian PLY is supported")
         data = np.frombuffer(fh.read(), dtype=np.dtype(props), count=count)
     xyz = np.stack([data["x"], data["y"], data["z"]], 1).astype(np.float32)
-    rgb = np.stack([data["red"], data["green"], data["blue"]], 1) if "red" in data.dtype.names else None
+    rgb = np.stack([data["red"], data["green"], data["blue"]], 1) if "red" in (data.dtype.names or ()) else None
     return xyz, rgb
 
 

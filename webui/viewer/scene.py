@@ -1,8 +1,12 @@
 """Build one run's 3D scene and controls on a viser server."""
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Any
+
 import numpy as np
 
+from storage.errors import NotFound
 from webui.viewer.run_data import Poses, RunData
 
 
@@ -41,10 +45,13 @@ def _segments(p: Poses, colors: np.ndarray | None = None) -> tuple[np.ndarray, n
     return seg, np.stack([colors[:-1], colors[1:]], axis=1)
 
 
-def _read_image(path, max_w: int = 480) -> np.ndarray:
+def _read_image(path: Path, max_w: int = 480) -> np.ndarray:
+    """(h, w, 3) uint8 RGB preview, at most ``max_w`` wide."""
     import cv2
 
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if img is None:
+        raise NotFound(f"{path.name}: not a readable image")
     img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
     if img.shape[1] > max_w:
         img = cv2.resize(img, (max_w, int(img.shape[0] * max_w / img.shape[1])))
@@ -65,6 +72,7 @@ def build_scene(server, data: RunData, title: str, fov_rad: float = 0.9, aspect:
         layers["Ground truth"].append(scene.add_line_segments(
             "/groundtruth", *_segments(data.groundtruth), thickness=2.0, thickness_units="screen"))
     if data.points is not None:
+        points = data.points
         rgb = data.colors if data.colors is not None else height_colors(data.points)
         cloud = scene.add_point_cloud("/map", data.points, rgb, point_size=0.01)
         layers["Map"].append(cloud)
@@ -77,8 +85,7 @@ def build_scene(server, data: RunData, title: str, fov_rad: float = 0.9, aspect:
 
         @mode.on_update
         def _(_) -> None:
-            cloud.colors = height_colors(data.points) if mode.value == "Height" or data.colors is None \
-                else data.colors
+            cloud.colors = height_colors(points) if mode.value == "Height" or data.colors is None else data.colors
     if data.keyframes is not None:
         for i, (p, q) in enumerate(zip(data.keyframes.positions, data.keyframes.wxyz)):
             layers["Keyframes"].append(scene.add_camera_frustum(
@@ -112,10 +119,10 @@ def _frame_slider(server, data: RunData, fov_rad: float, aspect: float) -> None:
                                                  or next(iter(data.previews[frames[0]].values()))),
                                      label="Frame")
 
-    def refresh(_=None) -> None:
+    def refresh(_: Any = None) -> None:
         i = int(slider.value)
         marker.position, marker.wxyz = traj.positions[i], traj.wxyz[i]
-        if image is not None and frames:
+        if image is not None and kind is not None and frames:
             nearest = min(frames, key=lambda f: abs(f - i))
             files = data.previews[nearest]
             path = files.get(kind.value) or files.get("rgb") or next(iter(files.values()))
