@@ -3,10 +3,9 @@
 Frames are streamed (read one at a time); the only per-frame state kept is the pose relative to its
 reference keyframe, so BA and loop corrections move every frame's pose at the end.
 
-Per-frame stages (segmentation, dynamic culling, restoration) plug in through `register_stage`: a factory
-`(config, camera) -> FrameStage`; a config lists the stages it runs in `config.stages`. A stage gets the
-frame, the inputs built so far and a `StageContext` (camera, config, the tracker's last result with its
-pose covariance, and the sequence for reading neighbouring frames), and returns updated `FrameInputs`.
+Per-frame stages (segmentation, dynamic culling, restoration) follow the contract of `worker.slam.stages`; a
+config lists the stages it runs in `config.stages`. Before each frame the pipeline gives them a fresh
+`StageContext` (the motion model's predicted pose, the last tracked pose and its covariance), never the tracker.
 """
 from __future__ import annotations
 
@@ -14,28 +13,29 @@ import json
 import resource
 import time
 from collections import defaultdict
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Protocol
 
 import cv2
 import numpy as np
 
-from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig
+from worker.slam.dynamic.stage import CullingStage, SegmentationStage
 from worker.slam.errors import ConfigError, EvaluationError, SlamError
-from worker.slam.features.types import Features
-from worker.slam.io.sequence import Frame, Sequence
+from worker.slam.geometry.se3 import inv, orthonormalize
+from worker.slam.inpainting.stage import RestorationStage
+from worker.slam.io.sequence import Sequence
 from worker.slam.io.trajectory import Trajectory, write_tum_trajectory
+from worker.slam.map.map import Map
 from worker.slam.mapping.dense import fuse_keyframes
 from worker.slam.mapping.local_mapping import LocalMapper
 from worker.slam.mapping.loop_closure import LoopCloser
-from worker.slam.map.map import Map
 from worker.slam.mapping.ply import write_ply
+from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPose, build_stages, register_stage
 from worker.slam.tracking.result import TrackResult
-from worker.slam.geometry.se3 import inv, orthonormalize
 from worker.slam.tracking.tracker import Tracker
-from worker.slam.truth import Truth, load_truth
+from worker.slam.truth import load_truth
 
 ProgressFn = Callable[[int, int, str], None]
 """(frames_done, frames_total, stage) -- stage is 'tracking', 'dense', 'evaluation' or 'writing'."""
@@ -49,75 +49,8 @@ class PipelineCancelled(SlamError):
     code = "cancelled"
 
 
-@dataclass
-class FrameInputs:
-    """What per-frame stages hand to the tracker (all optional; images are the frame's H,W)."""
-
-    exclude_mask: np.ndarray | None = None
-    """bool (H,W): True = pixel must not give features nor enter the dense map."""
-    extra_features: Features | None = None
-    """Keypoints to add to the frame's own (e.g. extracted in restored regions)."""
-    restored_depth: np.ndarray | None = None
-    """float32 metres (H,W): depth with removed regions filled; replaces the raw depth."""
-    restored_rgb: np.ndarray | None = None
-    """uint8 RGB (H,W,3): colour with removed regions filled; replaces the raw colour."""
-    info: dict = field(default_factory=dict)
-    """Per-frame numbers a stage wants reported (e.g. {'dynamic_px': 1234}); their means land in
-    metrics.json under `stage_info`."""
-    features: Features | None = None
-    """The frame's keypoints, already extracted (raw image coordinates) and culled: the tracker uses them
-    instead of extracting its own."""
-    potentially_dynamic: np.ndarray | None = None
-    """bool (H,W): pixels of potentially dynamic classes (segmentation)."""
-    dynamic_mask: np.ndarray | None = None
-    """bool (H,W): pixels judged moving (culling)."""
-    previews: dict[str, np.ndarray] | None = None
-    """RGB uint8 images worth saving for this frame (e.g. {'rgb', 'mask', 'restored'})."""
-
-
-@dataclass
-class StageContext:
-    camera: Camera
-    config: PipelineConfig
-    tracker: Tracker
-    """`tracker.last_result` (TrackResult: T_WC, covariance, feats) of the last tracked frame; `tracker.map`."""
-    sequence: Sequence | None
-    """For reading neighbouring frames (random access, decoded on demand)."""
-    truth: Truth | None = None
-    """The sequence's ground truth of dynamic pixels and background (`truth/`), when it has one."""
-
-
-class FrameStage(Protocol):
-    name: str
-
-    def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs: ...
-
-    def summary(self) -> dict:
-        """Run-level figures of the stage (stored in metrics.json under the stage's name)."""
-        ...
-
-
-StageFactory = Callable[[PipelineConfig, Camera], FrameStage]
-_STAGES: dict[str, StageFactory] = {}
-
-
-def register_stage(name: str, factory: StageFactory) -> None:
-    _STAGES[name] = factory
-
-
-def _register_dynamic_stages() -> None:
-    from worker.slam.dynamic.stage import CullingStage, SegmentationStage
-    from worker.slam.inpainting.stage import RestorationStage
-
-    for cls in (SegmentationStage, CullingStage, RestorationStage):
-        register_stage(cls.name, cls)
-
-
-def build_stages(config: PipelineConfig, camera: Camera) -> list[FrameStage]:
-    missing = [s for s in config.stages if s not in _STAGES]
-    if missing:
-        raise ConfigError(f"unknown pipeline stages {missing}; registered: {sorted(_STAGES)}")
-    return [_STAGES[s](config, camera) for s in config.stages]
+for _cls in (SegmentationStage, CullingStage, RestorationStage):
+    register_stage(_cls.name, _cls)
 
 
 @dataclass
@@ -169,7 +102,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
                          config.tracking.huber_px)
     closer = (LoopCloser(smap, config.loop, camera.K, tracker.bf, tracker.extractor.inv_sigma2)
               if config.loop.enabled else None)
-    ctx = StageContext(camera, config, tracker, sequence, load_truth(sequence.root))
+    run_ctx = StageContext(camera, config, tracker.extractor, sequence, load_truth(sequence.root))
     previews = _PreviewPicker(start, total)
     timer = _Timer()
     rel: list[tuple[int, np.ndarray]] = []  # per frame: (reference keyframe, T_ref_frame)
@@ -186,6 +119,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
         frame = first if k == 0 else sequence[i]
         t = timer("read", t)
         inputs = FrameInputs()
+        ctx = _frame_context(run_ctx, tracker)
         for st in stages:
             inputs = st.process(frame, inputs, ctx)
             t = timer(st.name, t)
@@ -195,10 +129,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
         c0 = time.process_time()
         if inputs.previews:
             previews.offer(frame.index, inputs.previews)
-        res = tracker.track(frame.index, frame.timestamp, frame.rgb, frame.depth,
-                            exclude_mask=inputs.exclude_mask, extra_features=inputs.extra_features,
-                            restored_depth=inputs.restored_depth, restored_rgb=inputs.restored_rgb,
-                            features=inputs.features)
+        res = tracker.track(frame.index, frame.timestamp, frame.rgb, frame.depth, inputs.track_inputs())
         cpu_tracking.append(time.process_time() - c0)
         t = timer("tracking", t)
         if res.keyframe is not None:
@@ -267,6 +198,13 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     return result
 
 
+def _frame_context(run_ctx: StageContext, tracker: Tracker) -> StageContext:
+    """The run's context with the tracker's prediction for the coming frame and its last tracked pose."""
+    last = tracker.last_result
+    return replace(run_ctx, T_WC_pred=tracker.predicted_pose(),
+                   last=None if last is None else TrackedPose(last.index, last.T_WC, last.covariance))
+
+
 def _relative(smap: Map, res: TrackResult) -> tuple[int, np.ndarray]:
     if not len(smap):
         return 0, res.T_WC.copy()
@@ -333,5 +271,3 @@ def _write_frame_stats(path: Path, rows: list[dict]) -> None:
         for r in rows:
             writer.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in keys})
 
-
-_register_dynamic_stages()

@@ -6,14 +6,15 @@ import json
 import numpy as np
 import pytest
 
+from formats.ply import read_ply
 from tests.worker.slam.synthetic_room import trajectory, write_sequence
 from worker.slam.camera import PRESETS
-from worker.slam.config import (PipelineConfig, get_preset, preset_names, register_preset, register_section)
+from worker.slam.config import PipelineConfig, get_preset, preset_names, register_preset, register_section
 from worker.slam.errors import ConfigError
-from worker.slam.io.sequence import Sequence
+from worker.slam.io.sequence import Frame, Sequence
 from worker.slam.io.trajectory import read_tum_trajectory
-from worker.slam.mapping.ply import read_ply
-from worker.slam.pipeline import FrameInputs, PipelineCancelled, register_stage, run_pipeline
+from worker.slam.pipeline import PipelineCancelled, run_pipeline
+from worker.slam.stages import FrameInputs, StageContext, register_stage
 
 
 @pytest.fixture(scope="module")
@@ -60,13 +61,17 @@ class _MaskLeftHalf:
 
     name = "mask_left"
 
-    def process(self, frame, inputs: FrameInputs, ctx) -> FrameInputs:
+    def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
         mask = np.zeros(frame.depth.shape, bool)
         mask[:, : frame.depth.shape[1] // 2] = True
         inputs.exclude_mask = mask
         inputs.info["masked_px"] = int(mask.sum())
-        if ctx.tracker.last_result is not None:
-            assert ctx.tracker.last_result.covariance is None or ctx.tracker.last_result.covariance.shape == (6, 6)
+        if ctx.last is not None:  # the last tracked pose, predicted from since
+            assert ctx.last.covariance is None or ctx.last.covariance.shape == (6, 6)
+            assert ctx.T_WC_pred is not None and ctx.T_WC_pred.shape == (4, 4)
+            assert ctx.last.index < frame.index
+        else:
+            assert frame.index == 0
         return inputs
 
 
@@ -74,11 +79,11 @@ class _MaskLeftHalf:
 def isolated_registries(monkeypatch):
     """Registrations made by a test vanish after it (other tests compare the real registries)."""
     import worker.slam.config as config_mod
-    import worker.slam.pipeline as pipeline_mod
+    import worker.slam.stages as stages_mod
 
     monkeypatch.setattr(config_mod, "_PRESETS", dict(config_mod._PRESETS))
     monkeypatch.setattr(config_mod, "_SECTIONS", dict(config_mod._SECTIONS))
-    monkeypatch.setattr(pipeline_mod, "_STAGES", dict(pipeline_mod._STAGES))
+    monkeypatch.setattr(stages_mod, "_STAGES", dict(stages_mod._STAGES))
 
 
 def test_registered_stage_and_preset_plug_in(room_seq, isolated_registries):

@@ -8,11 +8,12 @@ from tests.worker.slam.synthetic_room import K_SYN, pose, render, trajectory
 from worker.slam.camera import Camera
 from worker.slam.config import TrackingConfig, get_preset
 from worker.slam.features.types import Features
-from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
-from worker.slam.tracking.motion import ConstantVelocityModel
 from worker.slam.geometry.pnp import pnp_ransac
 from worker.slam.geometry.pose_optimizer import optimize_pose, pose_entropy
 from worker.slam.geometry.se3 import exp_se3, inv, log_se3, pose_distance, transform
+from worker.slam.tracking.inputs import TrackInputs
+from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
+from worker.slam.tracking.motion import ConstantVelocityModel
 from worker.slam.tracking.tracker import Tracker
 
 CAM = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, name="synthetic")
@@ -107,7 +108,8 @@ def test_tracker_hooks_exclude_mask_and_extra_features():
     for i, T in enumerate(poses):
         rgb, depth = render(T)
         restored = depth.copy()
-        res = tr.track(i, i / 30, rgb, depth, exclude_mask=exclude, extra_features=extra, restored_depth=restored)
+        res = tr.track(i, i / 30, rgb, depth,
+                       TrackInputs(exclude_mask=exclude, extra_features=extra, restored_depth=restored))
         own = res.feats.uv[:-2]
         inside = (own[:, 0] >= 200) & (own[:, 0] < 400) & (own[:, 1] >= 100) & (own[:, 1] < 300)
         assert not inside.any()

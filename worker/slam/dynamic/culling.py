@@ -16,8 +16,14 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from worker.slam.dynamic.epipolar import (Matches, epipolar_distance, fundamental_ransac, match_guided,
-                                          match_orb, predict_positions)
+from worker.slam.dynamic.epipolar import (
+    Matches,
+    epipolar_distance,
+    fundamental_ransac,
+    match_guided,
+    match_orb,
+    predict_positions,
+)
 from worker.slam.dynamic.segments import grow_by_depth, split_segments
 from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy
 from worker.slam.features.depth import backproject

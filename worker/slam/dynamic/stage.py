@@ -14,12 +14,14 @@ import cv2
 import numpy as np
 
 from worker.slam.camera import Camera
-from worker.slam.dynamic.culling import CullingConfig, cull_frame, dilate_disc, mask_at
+from worker.slam.config import PipelineConfig
+from worker.slam.dynamic.culling import CullingConfig, CullingResult, cull_frame, dilate_disc, mask_at
 from worker.slam.errors import SequenceFormatError
 from worker.slam.features.types import Features
+from worker.slam.geometry.se3 import inv
 from worker.slam.io.sequence import Frame
 from worker.slam.segmentation.base import SegmenterConfig, make_segmenter
-from worker.slam.geometry.se3 import inv
+from worker.slam.stages import FrameInputs, StageContext
 from worker.slam.truth import TruthScores
 
 
@@ -68,11 +70,11 @@ class _PastFrame:
 class SegmentationStage:
     name = "segmentation"
 
-    def __init__(self, config, camera: Camera) -> None:
+    def __init__(self, config: PipelineConfig, camera: Camera) -> None:
         cfg: SegmentationStageConfig = config.section("segmentation")
         self.segmenter = make_segmenter(cfg.segmenter) if cfg.source == "network" else None
 
-    def process(self, frame: Frame, inputs, ctx):
+    def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
         if self.segmenter is None:
             if ctx.truth is None:
                 raise SequenceFormatError("segmentation.source 'truth' needs a sequence with truth/ masks",
@@ -88,7 +90,7 @@ class SegmentationStage:
 class CullingStage:
     name = "culling"
 
-    def __init__(self, config, camera: Camera) -> None:
+    def __init__(self, config: PipelineConfig, camera: Camera) -> None:
         self.cfg: CullingStageConfig = config.section("culling")
         self.use_segmentation = "segmentation" in config.stages
         self.camera = camera
@@ -99,23 +101,24 @@ class CullingStage:
         # Wall time of cull_frame alone (the stage also extracts the frame's ORB, which tracking needs anyway).
         # Not process CPU time: OpenCV's worker threads spin on an idle core and would inflate it.
         self.decision_ms: list[float] = []
-        self.last = None  # this frame's CullingResult, None when nothing was compared (bench/plot_culling.py)
+        # This frame's result, None when nothing was compared (bench/plot_culling.py).
+        self.last: CullingResult | None = None
 
-    def process(self, frame: Frame, inputs, ctx):
+    def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
         if self.scores is None and ctx.truth is not None:
             self.scores = TruthScores(ctx.truth)
         self.last = None
         gray = cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY)
-        feats = ctx.tracker.extractor.extract(gray, frame.depth)
+        feats = ctx.extractor.extract(gray, frame.depth)
         removed = np.zeros(len(feats), bool)
-        last = ctx.tracker.last_result
-        if self.history and last is not None and last.ok and last.index == self.history[-1].index:
+        last = ctx.last
+        if self.history and last is not None and last.index == self.history[-1].index:
             self.history[-1].T_WC = last.T_WC
         if self.history and len(feats):
             past = self.history[0]  # the oldest kept: `lag_frames` back
             prev_feats, prev_depth = past.feats, past.depth
             cov = last.covariance if last is not None else None
-            T_pred = ctx.tracker.motion.predict()
+            T_pred = ctx.T_WC_pred
             T_cur_prev = inv(T_pred) @ past.T_WC if T_pred is not None and past.T_WC is not None else None
             cfg = self.cfg.culling
             if not self.use_segmentation:
@@ -165,7 +168,7 @@ class CullingStage:
         return removed
 
     def summary(self) -> dict:
-        out = {"features_removed": self.removed_total, "features_kept": self.kept_total,
+        out: dict = {"features_removed": self.removed_total, "features_kept": self.kept_total,
                "features_readmitted": self.readmitted_total,
                "frames_compared": self.compared, "guided_matching_frames": self.guided,
                "decision_ms_median": float(np.median(self.decision_ms)) if self.decision_ms else None}

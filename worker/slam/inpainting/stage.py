@@ -14,10 +14,12 @@ import cv2
 import numpy as np
 
 from worker.slam.camera import Camera
+from worker.slam.config import PipelineConfig
 from worker.slam.features.types import Features
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
-from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, restore_frame
+from worker.slam.inpainting.restore import ReferenceView, Restoration, RestorationConfig, restore_frame
 from worker.slam.io.sequence import Frame
+from worker.slam.stages import FrameInputs, StageContext
 from worker.slam.truth import restoration_psnr
 
 
@@ -55,7 +57,7 @@ class _Past:
 class RestorationStage:
     name = "restoration"
 
-    def __init__(self, config, camera: Camera) -> None:
+    def __init__(self, config: PipelineConfig, camera: Camera) -> None:
         self.cfg: RestorationStageConfig = config.section("restoration")
         self.camera = camera
         self.past: deque[_Past] = deque(maxlen=self.cfg.references.window)
@@ -65,15 +67,15 @@ class RestorationStage:
         self.extra = 0
         self.relaxed = 0
 
-    def _record_pose(self, ctx) -> None:
-        last = ctx.tracker.last_result
+    def _record_pose(self, ctx: StageContext) -> None:
+        last = ctx.last
         if last is None:
             return
         for p in self.past:
             if p.index == last.index:
                 p.T_WC = last.T_WC.copy()
 
-    def process(self, frame: Frame, inputs, ctx):
+    def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
         self._record_pose(ctx)
         hole = inputs.dynamic_mask if inputs.dynamic_mask is not None else np.zeros(frame.depth.shape, bool)
         desc = inputs.features.desc if inputs.features is not None else None
@@ -82,8 +84,9 @@ class RestorationStage:
         self.past.append(_Past(frame.index, frame.rgb, frame.depth, hole, desc))
         return inputs
 
-    def _restore(self, frame: Frame, hole: np.ndarray, desc, inputs, ctx) -> None:
-        T_pred = ctx.tracker.motion.predict()
+    def _restore(self, frame: Frame, hole: np.ndarray, desc: np.ndarray | None, inputs: FrameInputs,
+                 ctx: StageContext) -> None:
+        T_pred = ctx.T_WC_pred
         if T_pred is None:  # before the first tracked frame there is no pose to warp into
             return
         posed = [p for p in self.past if p.T_WC is not None]
@@ -112,10 +115,11 @@ class RestorationStage:
             if ok.any():
                 self.depth_err.append(float(np.median(np.abs(out.depth[ok] - bg[ok]))))
 
-    def _restored_features(self, out, hole, own: Features | None, ctx) -> Features:
+    def _restored_features(self, out: Restoration, hole: np.ndarray, own: Features | None,
+                           ctx: StageContext) -> Features:
         region = cv2.dilate(hole.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
         gray = cv2.cvtColor(out.rgb, cv2.COLOR_RGB2GRAY)
-        feats = ctx.tracker.extractor.extract(gray, out.depth, ~region)
+        feats = ctx.extractor.extract(gray, out.depth, ~region)
         if not len(feats):
             return feats
         h, w = hole.shape
@@ -127,7 +131,7 @@ class RestorationStage:
         return feats.select(keep)
 
     def summary(self) -> dict:
-        out = {"restored_frames": self.restored_frames, "restored_features": self.extra,
+        out: dict = {"restored_frames": self.restored_frames, "restored_features": self.extra,
                "relaxed_reference_choices": self.relaxed}
         if self.psnr:
             out["truth"] = {"restoration_psnr": float(np.mean(self.psnr)),

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from worker.slam.map.map import Map
 from worker.slam.geometry import reprojection as rp
 from worker.slam.geometry.pose_optimizer import CHI2_MONO, CHI2_STEREO
 from worker.slam.geometry.se3 import exp_se3, inv, orthonormalize
+from worker.slam.map.map import Map
 
 
 @dataclass

@@ -5,8 +5,8 @@ import numpy as np
 
 from worker.slam.config import MappingConfig
 from worker.slam.map.keyframe import KeyFrame
-from worker.slam.mapping.local_ba import BAStats, local_bundle_adjust
 from worker.slam.map.map import Map
+from worker.slam.mapping.local_ba import BAStats, local_bundle_adjust
 
 MIN_OBSERVATIONS = 2
 

@@ -12,13 +12,13 @@ import numpy as np
 
 from worker.slam.config import LoopConfig
 from worker.slam.features.matching import match_ratio
+from worker.slam.geometry.pnp import pnp_ransac
+from worker.slam.geometry.pose_optimizer import optimize_pose
+from worker.slam.geometry.se3 import inv, orthonormalize, pose_distance
 from worker.slam.map.keyframe import KeyFrame
 from worker.slam.map.map import Map
 from worker.slam.mapping.place_recognition import PlaceRecognizer
 from worker.slam.mapping.pose_graph import optimize_pose_graph
-from worker.slam.geometry.pnp import pnp_ransac
-from worker.slam.geometry.pose_optimizer import optimize_pose
-from worker.slam.geometry.se3 import inv, orthonormalize, pose_distance
 
 STRONG_COVIS = 100
 MAX_CANDIDATES = 3

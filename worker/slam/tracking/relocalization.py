@@ -5,8 +5,8 @@ import numpy as np
 
 from worker.slam.features.matching import match_ratio
 from worker.slam.features.types import Features
-from worker.slam.map.map import Map
 from worker.slam.geometry.pnp import pnp_ransac
+from worker.slam.map.map import Map
 
 
 def relocalisation_candidates(slam_map: Map, n_recent: int, around: int | None) -> list[int]:

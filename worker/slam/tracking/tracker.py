@@ -1,10 +1,11 @@
 """The RGB-D tracker: one call per frame, ORB-SLAM2 style.
 
-Per frame: ORB features (minus an optional exclude mask, plus optional extra features), depth per keypoint
-(restored depth when given), pose predicted by the constant-velocity model, projection search against the
-local map (points of the keyframes covisible with the reference keyframe), motion-only BA, a second finer
-search and BA; relocalisation against keyframes when that fails; keyframe decision and creation of new map
-points from keyframe depth. Local BA, culling and loop closure run afterwards on the keyframe it returns.
+Per frame: ORB features (the stages' culled ones, or extracted here minus an exclude mask; plus extra
+features), depth per keypoint (restored depth when given), pose predicted by the constant-velocity model,
+projection search against the local map (points of the keyframes covisible with the reference keyframe),
+motion-only BA, a second finer search and BA; relocalisation against keyframes when that fails; keyframe
+decision and creation of new map points from keyframe depth. Local BA, culling and loop closure run
+afterwards on the keyframe it returns.
 """
 from __future__ import annotations
 
@@ -17,15 +18,16 @@ from worker.slam.features.depth import backproject, lookup_depth
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.search import KeypointIndex
 from worker.slam.features.types import Features
+from worker.slam.geometry.pose_optimizer import PoseEstimate, optimize_pose
+from worker.slam.geometry.se3 import transform
 from worker.slam.map.keyframe import KeyFrame
 from worker.slam.map.map import Map
+from worker.slam.tracking.inputs import TrackInputs
 from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
 from worker.slam.tracking.motion import ConstantVelocityModel
-from worker.slam.geometry.pose_optimizer import PoseEstimate, optimize_pose
 from worker.slam.tracking.projection import search_by_projection
 from worker.slam.tracking.relocalization import pnp_against_keyframe, relocalisation_candidates
 from worker.slam.tracking.result import TrackResult
-from worker.slam.geometry.se3 import transform
 
 MIN_INIT_POINTS = 50
 
@@ -45,30 +47,28 @@ class Tracker:
         self.last_kf_frame = -1
         self.last_point_ids = np.zeros(0, np.int64)
         self.lost_streak = 0
-        #: The last successfully tracked frame's result (for the dynamic stages).
+        #: The last successfully tracked frame's result (the pipeline hands its pose to the stages).
         self.last_result: TrackResult | None = None
 
     # ---- public ------------------------------------------------------------------------------------------
 
-    def track(self, index: int, timestamp: float, rgb: np.ndarray, depth: np.ndarray, *,
-              exclude_mask: np.ndarray | None = None, extra_features: Features | None = None,
-              restored_depth: np.ndarray | None = None, restored_rgb: np.ndarray | None = None,
-              features: Features | None = None) -> TrackResult:
+    def predicted_pose(self) -> np.ndarray | None:
+        """T_WC (4,4) the motion model expects for the next frame; None before the first tracked frame."""
+        return self.motion.predict()
+
+    def track(self, index: int, timestamp: float, rgb: np.ndarray, depth: np.ndarray,
+              given: TrackInputs | None = None) -> TrackResult:
         """Track one frame. `rgb` RGB uint8 (H,W,3); `depth` float32 metres (H,W), 0 = invalid.
 
-        Plug-in points for the dynamic stages (all optional, same H,W):
-        `exclude_mask` bool: True pixels give no keypoints and are left out of the dense map;
-        `extra_features`: keypoints to add (e.g. found in restored regions; depth 0 is looked up);
-        `restored_depth` float32 metres / `restored_rgb` uint8 RGB: the frame with dynamic regions filled,
-        used for keypoint depth and the dense map instead of the raw images;
-        `features`: the frame's keypoints already extracted (and culled) by a stage, in raw coordinates; used
-        instead of extracting again (their depth is refreshed from the restored depth when there is one).
+        `given`: what the per-frame stages found (features, exclude mask, restored images; see `TrackInputs`).
         """
-        if restored_rgb is not None:
-            rgb = restored_rgb
+        given = given if given is not None else TrackInputs()
+        exclude_mask, restored_depth = given.exclude_mask, given.restored_depth
+        if given.restored_rgb is not None:
+            rgb = given.restored_rgb
         used_depth = restored_depth if restored_depth is not None else depth
-        if features is not None:
-            feats = features
+        if given.features is not None:
+            feats = given.features
             if restored_depth is not None and len(feats):
                 feats = feats.select(np.arange(len(feats)))
                 feats.depth = lookup_depth(feats.uv, used_depth, self.cfg.features.min_depth_m,
@@ -77,6 +77,7 @@ class Tracker:
         else:
             gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
             feats = self.extractor.extract(gray, used_depth, exclude_mask)
+        extra_features = given.extra_features
         if extra_features is not None and len(extra_features):
             extra = extra_features.select(np.arange(len(extra_features)))
             missing = extra.depth <= 0

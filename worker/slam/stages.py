@@ -1,0 +1,116 @@
+"""The per-frame stage contract: what a stage gets, what it returns, and the registry that builds stages by name.
+
+A stage (segmentation, dynamic culling, restoration) runs before tracking. It gets the frame, the `FrameInputs`
+built so far and a `StageContext` -- a narrow, read-only view of the run (camera, config, predicted and last
+pose, the feature extractor, the sequence and its truth), never the tracker itself -- and returns updated
+`FrameInputs`; the pipeline hands their `track_inputs()` to the tracker.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from worker.slam.camera import Camera
+from worker.slam.config import PipelineConfig
+from worker.slam.errors import ConfigError
+from worker.slam.features.orb import OrbExtractor
+from worker.slam.features.types import Features
+from worker.slam.io.sequence import Frame, Sequence
+from worker.slam.tracking.inputs import TrackInputs
+from worker.slam.truth import Truth
+
+
+@dataclass
+class FrameInputs:
+    """What the stages built for one frame (all optional; images are the frame's H,W)."""
+
+    exclude_mask: np.ndarray | None = None
+    """bool (H,W): True = pixel must not give features nor enter the dense map."""
+    extra_features: Features | None = None
+    """Keypoints to add to the frame's own (e.g. extracted in restored regions)."""
+    restored_depth: np.ndarray | None = None
+    """float32 metres (H,W): depth with removed regions filled; replaces the raw depth."""
+    restored_rgb: np.ndarray | None = None
+    """uint8 RGB (H,W,3): colour with removed regions filled; replaces the raw colour."""
+    info: dict[str, float] = field(default_factory=dict)
+    """Per-frame numbers a stage wants reported (e.g. {'dynamic_px': 1234}); their means land in
+    metrics.json under `stage_info`."""
+    features: Features | None = None
+    """The frame's keypoints, already extracted (raw image coordinates) and culled: the tracker uses them
+    instead of extracting its own."""
+    potentially_dynamic: np.ndarray | None = None
+    """bool (H,W): pixels of potentially dynamic classes (segmentation)."""
+    dynamic_mask: np.ndarray | None = None
+    """bool (H,W): pixels judged moving (culling)."""
+    previews: dict[str, np.ndarray] | None = None
+    """RGB uint8 images worth saving for this frame (e.g. {'rgb', 'mask', 'restored'})."""
+
+    def track_inputs(self) -> TrackInputs:
+        """The part the tracker reads."""
+        return TrackInputs(features=self.features, exclude_mask=self.exclude_mask,
+                           extra_features=self.extra_features, restored_depth=self.restored_depth,
+                           restored_rgb=self.restored_rgb)
+
+
+@dataclass(frozen=True)
+class TrackedPose:
+    """The last successfully tracked frame, as the stages see it."""
+
+    index: int
+    """Its frame index."""
+    T_WC: np.ndarray
+    """(4,4) float64 camera-to-world pose estimated for it."""
+    covariance: np.ndarray | None
+    """(6,6) of the T_CW left perturbation (rho, phi) from motion-only BA; None for the map's first frame."""
+
+
+@dataclass(frozen=True)
+class StageContext:
+    """Everything a stage may read about the run; rebuilt before each frame's stages."""
+
+    camera: Camera
+    config: PipelineConfig
+    extractor: OrbExtractor
+    """The tracker's ORB extractor: a stage that extracts the frame's features uses the same settings."""
+    sequence: Sequence | None
+    """For reading neighbouring frames (random access, decoded on demand)."""
+    truth: Truth | None = None
+    """The sequence's ground truth of dynamic pixels and background (`truth/`), when it has one."""
+    T_WC_pred: np.ndarray | None = None
+    """(4,4) float64: the motion model's pose prediction for this frame; None before the first tracked frame."""
+    last: TrackedPose | None = None
+    """The last successfully tracked frame; None before the first."""
+
+
+class FrameStage(Protocol):
+    name: str
+
+    def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs: ...
+
+    def summary(self) -> dict:
+        """Run-level figures of the stage (stored in metrics.json under the stage's name)."""
+        ...
+
+
+StageFactory = Callable[[PipelineConfig, Camera], FrameStage]
+"""Builds a stage for one run: `(config, camera) -> FrameStage`."""
+
+
+_STAGES: dict[str, StageFactory] = {}
+"""Stage factories by the name a config lists in `config.stages` (`worker.slam.presets` registers the shipped
+ones)."""
+
+
+def register_stage(name: str, factory: StageFactory) -> None:
+    _STAGES[name] = factory
+
+
+def build_stages(config: PipelineConfig, camera: Camera) -> list[FrameStage]:
+    """The stages `config.stages` names, in order; an unknown name is a ConfigError."""
+    missing = [s for s in config.stages if s not in _STAGES]
+    if missing:
+        raise ConfigError(f"unknown pipeline stages {missing}; registered: {sorted(_STAGES)}")
+    return [_STAGES[s](config, camera) for s in config.stages]
