@@ -47,7 +47,6 @@ def ingest_staged(
     *,
     name: str,
     camera: dict[str, Any],
-    content_sha256: str | None = None,
 ) -> Sequence:
     """Validate, install and record an upload in the staging folder ``staging``.
 
@@ -67,10 +66,7 @@ def ingest_staged(
         root = find_root(unpacked)
         info = validate_sequence(root, camera)
         installed = store.install_sequence(root, seq_id)
-        return _record(
-            session, store, seq_id, installed, info,
-            name=name, camera=camera, source="upload", content_sha256=content_sha256,
-        )
+        return _record(session, store, seq_id, installed, info, name=name, camera=camera, source="upload")
     except BaseException:
         if installed is not None:
             store.delete_sequence(seq_id)
@@ -140,7 +136,6 @@ def _record(
     name: str,
     camera: dict[str, Any],
     source: str,
-    content_sha256: str | None = None,
 ) -> Sequence:
     try:
         return sequences.create(
@@ -154,7 +149,6 @@ def _record(
             camera=camera,
             size_bytes=info.size_bytes,
             meta={**info.meta(), "source": source},
-            content_sha256=content_sha256,
         )
     except StorageError:
         raise
