@@ -61,6 +61,8 @@ class Sequence(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
     size_bytes: Mapped[int] = mapped_column(BigInteger, default=0)
     meta: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    # SHA-256 of the uploaded archive as it arrived: a second upload of the same file is refused (409).
+    content_sha256: Mapped[str | None] = mapped_column(String(64), index=True)
 
     # The database cascades the delete (passive_deletes): no job rows are loaded to remove them.
     jobs: Mapped[list[Job]] = relationship(

@@ -16,6 +16,9 @@ from storage.errors import InvalidInput
 PIPELINE_PRESETS: tuple[str, ...] = ("full", "no-restoration", "geometry-only", "orb-only")
 """Pipeline presets a job may name (``worker.slam.config.preset_names()``)."""
 
+DEFAULT_PIPELINE_PRESET = "full"
+"""What a job runs when it names no preset (``worker.slam.config.default_preset()``)."""
+
 CAMERA_PRESETS: tuple[str, ...] = ("7scenes", "bonn", "tum1", "tum2", "tum3")
 """Camera presets a sequence may name (``worker.slam.camera.PRESETS``)."""
 

@@ -9,6 +9,7 @@ from fastapi import Path
 from pydantic import BaseModel, ConfigDict, Field
 
 from storage.models import Batch, Job, JobStatus, Sequence
+from storage.presets import DEFAULT_PIPELINE_PRESET
 from storage.repositories.batches import ComparisonRow
 
 T = TypeVar("T")
@@ -25,6 +26,28 @@ BatchId = Annotated[str, Path(description="A batch's id.", examples=[_BATCH_ID])
 ArtifactName = Annotated[str, Path(description="A file the run wrote.", examples=["trajectory.txt"])]
 
 
+class LatestJob(BaseModel):
+    """A sequence's newest job, as the sequence list shows it."""
+
+    id: str
+    preset: str
+    status: JobStatus
+    progress: float
+    created_at: datetime
+    finished_at: datetime | None
+
+    @classmethod
+    def of(cls, job: Job) -> LatestJob:
+        return cls(
+            id=job.id,
+            preset=job.preset,
+            status=job.status,
+            progress=job.progress,
+            created_at=job.created_at,
+            finished_at=job.finished_at,
+        )
+
+
 class SequenceOut(BaseModel):
     id: str
     name: str
@@ -36,6 +59,8 @@ class SequenceOut(BaseModel):
     created_at: datetime
     meta: dict[str, Any]
     thumbnail_url: str
+    content_sha256: str | None = Field(description="SHA-256 of the uploaded archive (None if registered).")
+    latest_job: LatestJob | None = Field(description="The sequence's newest job, if any.")
 
     model_config = ConfigDict(
         json_schema_extra={
@@ -51,13 +76,15 @@ class SequenceOut(BaseModel):
                     "created_at": "2026-01-01T12:00:00Z",
                     "meta": {"width": 640, "height": 480, "gt_poses": 2864, "source": "upload"},
                     "thumbnail_url": f"/api/v1/sequences/{_SEQ_ID}/thumbnail",
+                    "content_sha256": "9f86d081884c7d659a2feaa0c55ad015a3bf4f1b2b0b822cd15d6c15b0f00a08",
+                    "latest_job": None,
                 }
             ]
         }
     )
 
     @classmethod
-    def of(cls, seq: Sequence) -> SequenceOut:
+    def of(cls, seq: Sequence, latest_job: Job | None = None) -> SequenceOut:
         return cls(
             id=seq.id,
             name=seq.name,
@@ -69,6 +96,8 @@ class SequenceOut(BaseModel):
             created_at=seq.created_at,
             meta=seq.meta,
             thumbnail_url=f"/api/v1/sequences/{seq.id}/thumbnail",
+            content_sha256=seq.content_sha256,
+            latest_job=LatestJob.of(latest_job) if latest_job is not None else None,
         )
 
 
@@ -91,7 +120,10 @@ class Page(BaseModel, Generic[T]):
 
 class JobCreate(BaseModel):
     sequence_id: str = Field(min_length=1, max_length=64, examples=[_SEQ_ID])
-    preset: str = Field(min_length=1, max_length=64, examples=["orb-only"])
+    preset: str = Field(
+        default=DEFAULT_PIPELINE_PRESET, min_length=1, max_length=64, examples=["orb-only"],
+        description=f"Pipeline preset (default {DEFAULT_PIPELINE_PRESET}).",
+    )
     config: dict[str, Any] | None = Field(
         default=None,
         description="Config overrides, nested or dotted (validated by the worker; a bad one fails the job).",
@@ -260,6 +292,11 @@ class TableRow(BaseModel):
     rpe_trans_rmse: float | None = Field(description="metres per RPE interval")
     rpe_rot_rmse: float | None = Field(description="degrees per RPE interval")
     fps: float | None
+    relocalisations: int | None = Field(description="times tracking was lost and found again")
+    mask_iou: float | None = Field(description="culled-region IoU against the true moving-object masks")
+    feature_precision: float | None = Field(description="removed features that were on true movers")
+    feature_recall: float | None = Field(description="features on true movers that were removed")
+    restoration_psnr: float | None = Field(description="dB, restored against the true background")
 
     @classmethod
     def of(cls, row: ComparisonRow) -> TableRow:

@@ -10,6 +10,7 @@ from pathlib import Path
 import anyio
 from fastapi import APIRouter, Request, Response, status
 from fastapi.responses import FileResponse
+from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 from backend.api.deps import Auth, Limit, Offset, SessionDep, SettingsDep, StoreDep
@@ -17,7 +18,7 @@ from backend.api.errors import error_responses
 from backend.api.guard import GuardedRoute
 from backend.api.schemas import Page, SequenceId, SequenceImport, SequenceOut
 from backend.api.upload import receive_upload
-from storage.errors import InvalidInput, NotFound
+from storage.errors import Conflict, InvalidInput, NotFound
 from storage.ingest import ingest_staged, register_folder, upload_limits
 from storage.ingest.archive import remove_tree
 from storage.ingest.stream import ArchiveSink
@@ -46,6 +47,12 @@ _UPLOAD_BODY = {
                             "examples": ["tum3", '{"fx":535.4,"fy":539.2,"cx":320.1,"cy":247.6}'],
                         },
                         "name": {"type": "string", "description": "display name (default: the file's)"},
+                        "allow_duplicate": {
+                            "type": "boolean",
+                            "description": "add the archive even if the same file was uploaded before "
+                            "(otherwise 409 naming that sequence)",
+                            "default": False,
+                        },
                     },
                 }
             }
@@ -53,6 +60,27 @@ _UPLOAD_BODY = {
     }
 }
 _ARCHIVE_SUFFIX = re.compile(r"(\.tar\.gz|\.tgz|\.zip|\.tar)$", re.IGNORECASE)
+
+
+_TRUE, _FALSE = {"true", "1", "yes", "on"}, {"false", "0", "no", "off", ""}
+
+
+def _flag(fields: dict[str, str], key: str) -> bool:
+    value = fields.get(key, "").strip().lower()
+    if value not in _TRUE | _FALSE:
+        raise InvalidInput(f"form field {key!r} must be true or false", {key: value[:40]})
+    return value in _TRUE
+
+
+def _refuse_duplicate(session: Session, sha256: str) -> None:
+    """A :class:`Conflict` naming the sequence this very archive already made, if there is one."""
+    existing = sequences.find_by_content(session, sha256)
+    if existing is not None:
+        raise Conflict(
+            f'this archive was already uploaded as "{existing.name}" (sequence {existing.id}); '
+            "send allow_duplicate=true to add it again",
+            {"existing_id": existing.id, "existing_name": existing.name, "sha256": sha256},
+        )
 
 
 def _default_name(filename: str | None) -> str:
@@ -66,7 +94,7 @@ def _default_name(filename: str | None) -> str:
     response_model=SequenceOut,
     dependencies=[Auth],
     openapi_extra=_UPLOAD_BODY,
-    responses=error_responses(401, 413, 422),
+    responses=error_responses(401, 409, 413, 422),
     summary="Upload a sequence archive",
 )
 async def upload_sequence(
@@ -74,7 +102,8 @@ async def upload_sequence(
 ) -> SequenceOut:
     """Stream the archive to disk, unpack it safely, validate the TUM layout and install it atomically.
 
-    Rejected uploads leave nothing behind (no files, no row).
+    Rejected uploads leave nothing behind (no files, no row); so do uploads the client abandons.
+    The same archive (SHA-256 of its bytes) a second time is a 409 unless ``allow_duplicate`` is true.
     """
     staging = store.new_staging_dir()
     sink = ArchiveSink(staging, upload_limits(settings))
@@ -85,9 +114,12 @@ async def upload_sequence(
             raise InvalidInput("the form needs a 'camera' field (a preset name or JSON intrinsics)")
         camera = parse_camera_spec(form.fields["camera"])
         name = (form.fields.get("name") or "").strip()[:255] or _default_name(form.filename)
+        if not _flag(form.fields, "allow_duplicate"):
+            await run_in_threadpool(_refuse_duplicate, session, form.sha256)
         with anyio.CancelScope(shield=True):  # once the body is in, finish even if the client leaves
             seq = await run_in_threadpool(
-                ingest_staged, session, store, settings, staging, name=name, camera=camera
+                ingest_staged, session, store, settings, staging,
+                name=name, camera=camera, content_sha256=form.sha256,
             )
     except BaseException:
         with anyio.CancelScope(shield=True):  # a disconnect cancels the request: clean up regardless
@@ -123,14 +155,20 @@ def list_sequences(
 ) -> Page[SequenceOut]:
     """Newest first."""
     items = sequences.list_sequences(session, limit=limit, offset=offset)
+    latest = sequences.latest_jobs(session, [s.id for s in items])
     return Page[SequenceOut](
-        items=[SequenceOut.of(s) for s in items], total=sequences.count(session), limit=limit, offset=offset
+        items=[SequenceOut.of(s, latest.get(s.id)) for s in items],
+        total=sequences.count(session),
+        limit=limit,
+        offset=offset,
     )
 
 
 @router.get("/{sequence_id}", response_model=SequenceOut, responses=error_responses(404))
 def get_sequence(sequence_id: SequenceId, session: SessionDep) -> SequenceOut:
-    return SequenceOut.of(sequences.get(session, sequence_id))
+    return SequenceOut.of(
+        sequences.get(session, sequence_id), sequences.latest_jobs(session, [sequence_id]).get(sequence_id)
+    )
 
 
 @router.get(

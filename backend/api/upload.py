@@ -8,6 +8,7 @@ at ``max_bytes``.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -28,6 +29,8 @@ class UploadedForm:
     fields: dict[str, str] = field(default_factory=dict)
     filename: str | None = None
     file_bytes: int = 0
+    sha256: str = ""
+    """Hex SHA-256 of the file part's bytes as they arrived (what duplicate detection compares)."""
 
 
 class Sink(Protocol):
@@ -128,20 +131,27 @@ async def receive_upload(request: Request, sink: Sink, *, file_field: str, max_b
         )
     }
     parser = MultipartParser(options[b"boundary"], callbacks)  # type: ignore[arg-type]
+    digest = hashlib.sha256()
+
+    def write(block: bytes) -> None:  # in a worker thread: hashing 4 MiB would stall the event loop
+        digest.update(block)
+        sink.write(block)
+
     try:
         async for chunk in request.stream():
             parser.write(chunk)
             if len(rx.buffer) >= WRITE_BLOCK:
                 block = bytes(rx.buffer)
                 rx.buffer.clear()
-                await run_in_threadpool(sink.write, block)
+                await run_in_threadpool(write, block)
         parser.finalize()
     except ClientDisconnect:
         raise InvalidInput("the client disconnected during the upload") from None
     except FormParserError as exc:
         raise InvalidInput(f"malformed multipart body: {exc}") from None
     if rx.buffer:
-        await run_in_threadpool(sink.write, bytes(rx.buffer))
+        await run_in_threadpool(write, bytes(rx.buffer))
     if rx.form.filename is None:
         raise InvalidInput(f"the form needs a {file_field!r} file part")
+    rx.form.sha256 = digest.hexdigest()
     return rx.form

@@ -47,6 +47,7 @@ def ingest_staged(
     *,
     name: str,
     camera: dict[str, Any],
+    content_sha256: str | None = None,
 ) -> Sequence:
     """Validate, install and record an upload in the staging folder ``staging``.
 
@@ -66,7 +67,10 @@ def ingest_staged(
         root = find_root(unpacked)
         info = validate_sequence(root, camera)
         installed = store.install_sequence(root, seq_id)
-        return _record(session, store, seq_id, installed, info, name=name, camera=camera, source="upload")
+        return _record(
+            session, store, seq_id, installed, info,
+            name=name, camera=camera, source="upload", content_sha256=content_sha256,
+        )
     except BaseException:
         if installed is not None:
             store.delete_sequence(seq_id)
@@ -136,6 +140,7 @@ def _record(
     name: str,
     camera: dict[str, Any],
     source: str,
+    content_sha256: str | None = None,
 ) -> Sequence:
     try:
         return sequences.create(
@@ -149,6 +154,7 @@ def _record(
             camera=camera,
             size_bytes=info.size_bytes,
             meta={**info.meta(), "source": source},
+            content_sha256=content_sha256,
         )
     except StorageError:
         raise

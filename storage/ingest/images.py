@@ -30,18 +30,27 @@ class ImageInfo:
     color_type: int | None = None  # PNG only
 
 
-def _bad(path: Path, message: str) -> InvalidInput:
-    return InvalidInput(f"{path.name}: {message}", {"file": str(path)})
+def _bad(label: str, message: str) -> InvalidInput:
+    return InvalidInput(f"{label}: {message}", {"file": label})
 
 
-def check_image(path: Path, *, verify: bool = True) -> ImageInfo:
-    """Header facts of a PNG or JPEG file; with ``verify`` the whole file's integrity too."""
+def _too_large(label: str, width: int, height: int) -> InvalidInput:
+    return _bad(label, f"image is too large ({width}x{height} = {width * height} pixels; "
+                       f"the limit is {MAX_PIXELS} pixels, e.g. 4096x4096)")
+
+
+def check_image(path: Path, *, verify: bool = True, label: str | None = None) -> ImageInfo:
+    """Header facts of a PNG or JPEG file; with ``verify`` the whole file's integrity too.
+
+    ``label`` names the file in errors (the sequence-relative path, e.g. ``rgb/1.png``); default its name.
+    """
+    label = label or path.name
     data = path.read_bytes() if verify else _head(path)
     if data[:8] == PNG_MAGIC:
-        return _png(path, data, verify)
+        return _png(label, data, verify)
     if data[:2] == b"\xff\xd8":
-        return _jpeg(path, data, verify)
-    raise _bad(path, "not a PNG or JPEG image")
+        return _jpeg(label, data, verify)
+    raise _bad(label, "not a PNG or JPEG image")
 
 
 def _head(path: Path) -> bytes:
@@ -49,17 +58,17 @@ def _head(path: Path) -> bytes:
         return fh.read(65536)
 
 
-def _png(path: Path, data: bytes, verify: bool) -> ImageInfo:
+def _png(label: str, data: bytes, verify: bool) -> ImageInfo:
     if len(data) < 33 or data[12:16] != b"IHDR":
-        raise _bad(path, "truncated PNG header")
+        raise _bad(label, "truncated PNG header")
     width, height, depth, ctype, _comp, _filt, interlace = struct.unpack(">IIBBBBB", data[16:29])
     if ctype not in _PNG_CHANNELS or depth not in (1, 2, 4, 8, 16) or width == 0 or height == 0:
-        raise _bad(path, "invalid PNG header")
+        raise _bad(label, "invalid PNG header")
     if width * height > MAX_PIXELS:
-        raise _bad(path, f"image is too large ({width}x{height})")
+        raise _too_large(label, width, height)
     info = ImageInfo("png", width, height, depth, _PNG_CHANNELS[ctype], ctype)
     if verify:
-        _verify_png(path, data, info, interlace)
+        _verify_png(label, data, info, interlace)
     return info
 
 
@@ -77,7 +86,7 @@ def _raw_size(info: ImageInfo, interlace: int) -> int:
     return total
 
 
-def _verify_png(path: Path, data: bytes, info: ImageInfo, interlace: int) -> None:
+def _verify_png(label: str, data: bytes, info: ImageInfo, interlace: int) -> None:
     pos, idat, seen_end = 8, [], False
     while pos + 12 <= len(data):
         (length,) = struct.unpack(">I", data[pos : pos + 4])
@@ -85,9 +94,9 @@ def _verify_png(path: Path, data: bytes, info: ImageInfo, interlace: int) -> Non
         body = data[pos + 8 : pos + 8 + length]
         crc = data[pos + 8 + length : pos + 12 + length]
         if len(body) != length or len(crc) != 4:
-            raise _bad(path, "truncated PNG")
+            raise _bad(label, "truncated PNG")
         if zlib.crc32(kind + body) != struct.unpack(">I", crc)[0]:
-            raise _bad(path, f"PNG chunk {kind.decode('latin-1')!r} is corrupt (CRC mismatch)")
+            raise _bad(label, f"PNG chunk {kind.decode('latin-1')!r} is corrupt (CRC mismatch)")
         if kind == b"IDAT":
             idat.append(body)
         elif kind == b"IEND":
@@ -95,7 +104,7 @@ def _verify_png(path: Path, data: bytes, info: ImageInfo, interlace: int) -> Non
             break
         pos += 12 + length
     if not seen_end or not idat:
-        raise _bad(path, "truncated PNG (no image data or no end)")
+        raise _bad(label, "truncated PNG (no image data or no end)")
     expected = _raw_size(info, interlace)
     dec = zlib.decompressobj()
     size = 0
@@ -106,29 +115,29 @@ def _verify_png(path: Path, data: bytes, info: ImageInfo, interlace: int) -> Non
             stream = dec.unconsumed_tail
             size += len(piece)
             if not interlace and piece:
-                _check_filters(path, piece, size - len(piece), info)
+                _check_filters(label, piece, size - len(piece), info)
             if size > expected:
-                raise _bad(path, "PNG data is larger than its header says")
+                raise _bad(label, "PNG data is larger than its header says")
             if dec.eof or not stream:
                 break
     except zlib.error as exc:
-        raise _bad(path, f"PNG data is corrupt ({exc})") from None
+        raise _bad(label, f"PNG data is corrupt ({exc})") from None
     if size != expected or not dec.eof:
-        raise _bad(path, f"PNG data is truncated ({size} of {expected} bytes)")
+        raise _bad(label, f"PNG data is truncated ({size} of {expected} bytes)")
 
 
-def _check_filters(path: Path, piece: bytes, offset: int, info: ImageInfo) -> None:
+def _check_filters(label: str, piece: bytes, offset: int, info: ImageInfo) -> None:
     stride = 1 + (info.width * info.channels * info.bit_depth + 7) // 8
     first = (-offset) % stride
     if any(b > 4 for b in piece[first::stride]):
-        raise _bad(path, "PNG data is corrupt (bad row filter)")
+        raise _bad(label, "PNG data is corrupt (bad row filter)")
 
 
-def _jpeg(path: Path, data: bytes, verify: bool) -> ImageInfo:
+def _jpeg(label: str, data: bytes, verify: bool) -> ImageInfo:
     i, info, sos = 2, None, None
     while i + 4 <= len(data):
         if data[i] != 0xFF:
-            raise _bad(path, "corrupt JPEG (bad marker)")
+            raise _bad(label, "corrupt JPEG (bad marker)")
         marker = data[i + 1]
         if marker == 0xFF:  # fill byte
             i += 1
@@ -136,7 +145,7 @@ def _jpeg(path: Path, data: bytes, verify: bool) -> ImageInfo:
         (seg_len,) = struct.unpack(">H", data[i + 2 : i + 4])
         if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
             if i + 10 > len(data):
-                raise _bad(path, "truncated JPEG header")
+                raise _bad(label, "truncated JPEG header")
             precision = data[i + 4]
             height, width = struct.unpack(">HH", data[i + 5 : i + 9])
             info = ImageInfo("jpeg", width, height, precision, data[i + 9])
@@ -145,9 +154,9 @@ def _jpeg(path: Path, data: bytes, verify: bool) -> ImageInfo:
             break
         i += 2 + seg_len
     if info is None or info.width == 0 or info.height == 0:
-        raise _bad(path, "JPEG without a valid frame header")
+        raise _bad(label, "JPEG without a valid frame header")
     if info.width * info.height > MAX_PIXELS:
-        raise _bad(path, f"image is too large ({info.width}x{info.height})")
+        raise _too_large(label, info.width, info.height)
     if verify and (sos is None or data.rfind(b"\xff\xd9") < sos):
-        raise _bad(path, "truncated JPEG (no end of image)")
+        raise _bad(label, "truncated JPEG (no end of image)")
     return info

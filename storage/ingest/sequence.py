@@ -199,10 +199,10 @@ def validate_sequence(folder: Path, camera: dict[str, Any] | None = None, sample
     for k in picks:
         i, j = pairs[k]
         rgb_path, depth_path = folder / rgb[i][1], folder / depth[j][1]
-        c = check_image(rgb_path)
+        c = check_image(rgb_path, label=rgb_path.relative_to(folder).as_posix())
         if c.bit_depth != 8 or c.color_type == 4:
             raise _err(folder, rgb_path, "colour images must be 8-bit grey, RGB or RGBA")
-        d = check_image(depth_path)
+        d = check_image(depth_path, label=depth_path.relative_to(folder).as_posix())
         if d.format != "png" or d.bit_depth != 16 or d.channels != 1:
             raise _err(folder, depth_path, "depth images must be 16-bit single-channel PNG")
         if (c.width, c.height) != (d.width, d.height):

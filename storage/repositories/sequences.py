@@ -24,6 +24,7 @@ def create(
     size_bytes: int = 0,
     meta: dict[str, Any] | None = None,
     id: str | None = None,
+    content_sha256: str | None = None,
 ) -> Sequence:
     """Record a sequence already in place; ``id`` may be chosen first to name its directory."""
     seq = Sequence(
@@ -36,6 +37,7 @@ def create(
         camera=camera or {},
         size_bytes=size_bytes,
         meta=meta or {},
+        content_sha256=content_sha256,
     )
     with writing(session):
         session.add(seq)
@@ -44,6 +46,37 @@ def create(
 
 def get(session: Session, sequence_id: str) -> Sequence:
     return get_or_raise(session, Sequence, sequence_id, "sequence")
+
+
+def find_by_content(session: Session, content_sha256: str) -> Sequence | None:
+    """The oldest sequence uploaded from an archive with this SHA-256 (hex), if any."""
+    stmt = (
+        select(Sequence)
+        .where(Sequence.content_sha256 == content_sha256)
+        .order_by(Sequence.created_at, Sequence.id)
+        .limit(1)
+    )
+    return session.scalars(stmt).first()
+
+
+def latest_jobs(session: Session, sequence_ids: list[str]) -> dict[str, Job]:
+    """Each listed sequence's newest job (by creation), for those that have one."""
+    if not sequence_ids:
+        return {}
+    newest = (
+        select(Job.sequence_id, func.max(Job.created_at).label("created_at"))
+        .where(Job.sequence_id.in_(sequence_ids))
+        .group_by(Job.sequence_id)
+        .subquery()
+    )
+    stmt = (
+        select(Job)
+        .join(newest, (Job.sequence_id == newest.c.sequence_id) & (Job.created_at == newest.c.created_at))
+        .order_by(Job.id)
+        .execution_options(populate_existing=True)
+    )
+    # Two jobs created in the same instant: the larger id wins, the same choice on every call.
+    return {job.sequence_id: job for job in session.scalars(stmt)}
 
 
 def list_sequences(session: Session, *, limit: int = 50, offset: int = 0) -> list[Sequence]:

@@ -58,7 +58,7 @@ def test_bad_url() -> None:
 def test_migrations_create_all_tables(engine: Engine) -> None:
     assert TABLES <= set(inspect(engine).get_table_names())
     with engine.connect() as conn:
-        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0003_requeues"
+        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0004_sequence_content_hash"
 
 
 def test_migrations_match_models(engine: Engine) -> None:

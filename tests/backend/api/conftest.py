@@ -58,10 +58,12 @@ def seq_tgz(seq_folder: Path, tmp_path_factory: pytest.TempPathFactory) -> bytes
 
 
 def upload(client: TestClient, data: bytes, *, filename: str = "seq.tgz", camera: str = "tum1",
-           name: str | None = None, headers: dict | None = None):
+           name: str | None = None, headers: dict | None = None, allow_duplicate: bool = False):
     form = {"camera": camera}
     if name is not None:
         form["name"] = name
+    if allow_duplicate:  # the same archive again (several tests upload one fixture many times)
+        form["allow_duplicate"] = "true"
     return client.post("/api/v1/sequences", files={"file": (filename, data, "application/gzip")},
                        data=form, headers=headers or {})
 

@@ -14,7 +14,7 @@ from tests.backend.api.conftest import upload
 
 @pytest.fixture
 def seqs(client, seq_tgz):
-    return [upload(client, seq_tgz, name=f"s{i}").json()["id"] for i in range(2)]
+    return [upload(client, seq_tgz, name=f"s{i}", allow_duplicate=True).json()["id"] for i in range(2)]
 
 
 def test_create_get_and_table(client, settings, queue, seqs):
@@ -67,3 +67,30 @@ def test_unknown_batch_and_bad_format(client, seqs):
     batch = client.post("/api/v1/batches", json={"sequence_ids": seqs, "presets": ["orb-only"]}).json()
     r = client.get(f"/api/v1/batches/{batch['id']}/table?format=xlsx")
     assert r.status_code == 422 and r.json()["error"]["code"] == "invalid_input"
+
+
+def test_named_batch_and_truth_scores_in_the_table(client, settings, seqs):
+    batch = client.post("/api/v1/batches", json={"sequence_ids": seqs[:1], "presets": ["full", "orb-only"],
+                                                 "name": "truth check"}).json()
+    assert batch["name"] == "truth check"
+    assert [b["name"] for b in client.get("/api/v1/batches").json()["items"]] == ["truth check"]
+    full, orb = (j["id"] for j in batch["jobs"])
+    engine = make_engine(settings)
+    with make_session_factory(engine)() as s:
+        for job_id, blob in [
+            (full, {"ate": {"rmse": 0.01}, "relocalisations": 2,
+                    "culling": {"truth": {"mask_iou": 0.61, "feature_precision": 0.9, "feature_recall": 0.4}},
+                    "restoration": {"truth": {"restoration_psnr": 24.5}}}),
+            (orb, {"ate": {"rmse": 0.03}, "relocalisations": 0}),
+        ]:
+            jobs.claim(s, job_id, "w")
+            metrics.save_run_metrics(s, job_id, blob)
+            jobs.finish(s, job_id, JobStatus.SUCCEEDED)
+    engine.dispose()
+    table = {r["preset"]: r for r in client.get(f"/api/v1/batches/{batch['id']}/table").json()}
+    assert (table["full"]["mask_iou"], table["full"]["feature_precision"], table["full"]["feature_recall"],
+            table["full"]["restoration_psnr"], table["full"]["relocalisations"]) == (0.61, 0.9, 0.4, 24.5, 2)
+    assert (table["orb-only"]["mask_iou"], table["orb-only"]["restoration_psnr"],
+            table["orb-only"]["relocalisations"]) == (None, None, 0)
+    rows = list(csv.DictReader(io.StringIO(client.get(f"/api/v1/batches/{batch['id']}/table?format=csv").text)))
+    assert rows[0]["restoration_psnr"] == "24.5" and rows[1]["mask_iou"] == ""

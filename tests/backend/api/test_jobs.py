@@ -61,10 +61,16 @@ def test_create_get_and_enqueue(client, queue, seq_id):
     assert got["id"] == job["id"] and got["metrics"] is None and got["eta_s"] is None
 
 
+def test_preset_defaults_to_full(client, queue, seq_id):
+    r = client.post("/api/v1/jobs", json={"sequence_id": seq_id})
+    assert r.status_code == 201, r.text
+    assert r.json()["preset"] == "full" and queue.ids == [r.json()["id"]]
+
+
 @pytest.mark.parametrize("body, status, code", [
     ({"sequence_id": "nope", "preset": "orb-only"}, 404, "not_found"),
     ({"sequence_id": "SEQ", "preset": "warp-drive"}, 422, "invalid_input"),
-    ({"sequence_id": "SEQ"}, 422, "invalid_input"),
+    ({"sequence_id": "SEQ", "preset": ""}, 422, "invalid_input"),
     ({"sequence_id": "SEQ", "preset": "orb-only", "config": [1, 2]}, 422, "invalid_input"),
     ({"sequence_id": "SEQ", "preset": "orb-only", "extra": 1}, 422, "invalid_input"),
     ({"sequence_id": "SEQ", "preset": "orb-only", "config": {"x": "y" * 70000}}, 422, "invalid_input"),
@@ -87,7 +93,7 @@ def test_queue_down_is_503_and_the_job_is_failed_not_stuck(client, queue, seq_id
 
 
 def test_list_filters_and_paging(client, db, settings, seq_id, seq_tgz):
-    other = upload(client, seq_tgz).json()["id"]
+    other = upload(client, seq_tgz, allow_duplicate=True).json()["id"]
     a, b, c = new_job(client, seq_id), new_job(client, seq_id), new_job(client, other)
     complete(db, settings, a["id"])
     assert client.get("/api/v1/jobs").json()["total"] == 3

@@ -4,14 +4,21 @@ from __future__ import annotations
 import pytest
 
 from storage.errors import InvalidInput
-from storage.presets import CAMERA_PRESETS, PIPELINE_PRESETS, check_preset, parse_camera_spec
+from storage.presets import (
+    CAMERA_PRESETS,
+    DEFAULT_PIPELINE_PRESET,
+    PIPELINE_PRESETS,
+    check_preset,
+    parse_camera_spec,
+)
 
 
 def test_pipeline_presets_mirror_the_pipeline_registry():
     import worker.slam.pipeline  # noqa: F401 - registers every stage/preset the pipeline ships
-    from worker.slam.config import preset_names
+    from worker.slam.config import default_preset, preset_names
 
     assert sorted(PIPELINE_PRESETS) == preset_names(), "update storage/presets.py PIPELINE_PRESETS"
+    assert DEFAULT_PIPELINE_PRESET == default_preset(), "update storage/presets.py DEFAULT_PIPELINE_PRESET"
 
 
 def test_camera_presets_mirror_the_camera_registry():

@@ -51,7 +51,7 @@ def test_upload_zip_of_the_folder_contents_with_intrinsics(client, seq_folder, t
 
 
 def test_list_paging_and_delete(client, settings, seq_tgz, queue):
-    ids = [upload(client, seq_tgz).json()["id"] for _ in range(3)]
+    ids = [upload(client, seq_tgz, allow_duplicate=True).json()["id"] for _ in range(3)]
     page = client.get("/api/v1/sequences?limit=2").json()
     assert page["total"] == 3 and len(page["items"]) == 2 and page["items"][0]["id"] == ids[-1]
     assert client.get("/api/v1/sequences?limit=2&offset=2").json()["items"][0]["id"] == ids[0]

@@ -77,6 +77,12 @@ def test_comparison_rows(session: Session, two: list[Sequence]) -> None:
         "rpe_trans_rmse": 0.1,
         "rpe_rot_rmse": 2.0,
         "fps": 12.0,
+        # no relocalisation count and no truth scores in this run's metrics
+        "relocalisations": None,
+        "mask_iou": None,
+        "feature_precision": None,
+        "feature_recall": None,
+        "restoration_psnr": None,
     }
     assert (rows[2].status, rows[2].ate_rmse) == ("failed", None)
     assert {r.status for r in rows[3:]} == {JobStatus.QUEUED.value}

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from formats.ply import read_ply, write_ply
 from tests.worker.slam.synthetic_room import K_SYN, render, trajectory
 from worker.slam.camera import Camera
 from worker.slam.config import MappingConfig, get_preset
@@ -11,7 +12,6 @@ from worker.slam.mapping.dense import fuse_keyframes, voxel_filter
 from worker.slam.mapping.local_ba import local_bundle_adjust
 from worker.slam.mapping.local_mapping import cull_points
 from worker.slam.map.map import Map
-from worker.slam.mapping.ply import read_ply, write_ply
 from worker.slam.geometry.se3 import exp_se3, inv, pose_distance
 from worker.slam.tracking.tracker import Tracker
 

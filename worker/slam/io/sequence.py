@@ -7,13 +7,13 @@ from typing import Iterator
 
 import numpy as np
 
+from formats.association import MAX_DIFF_S, associate
+from formats.errors import FormatError
+from formats.tum_lists import read_list
 from worker.slam.camera import Camera, load_camera_file
 from worker.slam.errors import CameraError, SequenceFormatError, TrajectoryFormatError
 from worker.slam.io.images import read_depth, read_rgb
-from worker.slam.io.lists import associate, read_file_list
 from worker.slam.io.trajectory import Trajectory, read_tum_trajectory
-
-MAX_DIFF_S = 0.02  # TUM associate.py default
 
 
 @dataclass(frozen=True)
@@ -48,13 +48,16 @@ class Sequence:
         #: The sequence's own camera.json wins over a preset: it describes these very images.
         self.camera: Camera = own or camera  # type: ignore[assignment]
         self.camera_source = "camera.json" if own else "given"
-        rgb = read_file_list(self.root / "rgb.txt")
-        depth = read_file_list(self.root / "depth.txt")
-        pairs = associate(np.array([t for t, _ in rgb]), np.array([t for t, _ in depth]), max_diff)
+        try:
+            rgb = read_list(self.root / "rgb.txt")
+            depth = read_list(self.root / "depth.txt")
+        except FormatError as exc:
+            raise SequenceFormatError(exc.message, path=exc.path, line=exc.line) from None
+        pairs = associate([e.timestamp for e in rgb], [e.timestamp for e in depth], max_diff)
         if not pairs:
             raise SequenceFormatError(f"no rgb/depth pairs within {max_diff} s", path=self.root / "rgb.txt")
         self.frames: list[FrameRef] = [
-            FrameRef(rgb[i][0], self.root / rgb[i][1], self.root / depth[j][1]) for i, j in pairs
+            FrameRef(rgb[i].timestamp, self.root / rgb[i].path, self.root / depth[j].path) for i, j in pairs
         ]
         self.n_rgb, self.n_depth = len(rgb), len(depth)
         gt_path = self.root / "groundtruth.txt"

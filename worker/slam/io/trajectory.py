@@ -1,4 +1,4 @@
-"""Timestamped trajectories of camera poses T_WC and their TUM text format (`t tx ty tz qx qy qz qw`)."""
+"""Timestamped trajectories of camera poses T_WC; their TUM text format is formats.trajectory's."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+import formats.trajectory
+from formats.errors import FormatError
 from worker.slam.errors import TrajectoryFormatError
 
 
@@ -45,44 +47,16 @@ def tum_rows_to_poses(rows: np.ndarray) -> np.ndarray:
 
 
 def read_tum_trajectory(path: Path | str) -> Trajectory:
-    """Read a TUM trajectory; `#` comments and blank lines are skipped; errors name the file and line."""
-    path = Path(path)
-    if not path.is_file():
-        raise TrajectoryFormatError("file not found", path=path)
-    stamps, rows = [], []
-    with path.open("r", encoding="utf-8", errors="replace") as fh:
-        for lineno, line in enumerate(fh, 1):
-            text = line.strip()
-            if not text or text.startswith("#"):
-                continue
-            parts = text.replace(",", " ").split()
-            if len(parts) != 8:
-                raise TrajectoryFormatError(f"expected 8 values (t tx ty tz qx qy qz qw), got {len(parts)}",
-                                            path=path, line=lineno)
-            try:
-                vals = [float(v) for v in parts]
-            except ValueError:
-                raise TrajectoryFormatError(f"not a number in {text!r}", path=path, line=lineno) from None
-            if not np.all(np.isfinite(vals)):
-                raise TrajectoryFormatError("non-finite value", path=path, line=lineno)
-            if abs(np.linalg.norm(vals[4:8]) - 1.0) > 0.1:
-                raise TrajectoryFormatError("quaternion is not unit length", path=path, line=lineno)
-            stamps.append(vals[0])
-            rows.append(vals[1:])
-    if not rows:
-        raise TrajectoryFormatError("no poses", path=path)
-    t = np.asarray(stamps)
-    order = np.argsort(t, kind="stable")
-    return Trajectory(t[order], tum_rows_to_poses(np.asarray(rows)[order]))
+    """Read a TUM trajectory (formats.trajectory); errors name the file and line."""
+    try:
+        tum = formats.trajectory.read_tum_trajectory(path)
+    except FormatError as exc:
+        raise TrajectoryFormatError(exc.message, path=exc.path, line=exc.line) from None
+    return Trajectory(tum.timestamps, tum_rows_to_poses(np.hstack([tum.positions, tum.quaternions])))
 
 
 def write_tum_trajectory(path: Path | str, traj: Trajectory, header: str | None = None) -> None:
     """Write atomically (temp file + rename) so a reader never sees half a trajectory."""
-    path = Path(path)
     rows = poses_to_tum_rows(traj.poses)
-    tmp = path.with_name(path.name + ".part")
-    with tmp.open("w") as fh:
-        fh.write(f"# {header or 'trajectory T_WC'}\n# timestamp tx ty tz qx qy qz qw\n")
-        for t, r in zip(traj.timestamps, rows):
-            fh.write(f"{t:.6f} " + " ".join(f"{v:.7f}" for v in r) + "\n")
-    tmp.replace(path)
+    formats.trajectory.write_tum_trajectory(
+        path, formats.trajectory.TumTrajectory(traj.timestamps, rows[:, :3], rows[:, 3:]), header)

@@ -1,0 +1,39 @@
+"""Names of the files a run writes into its output folder (the artifact store keeps them flat, one folder a run)."""
+
+from __future__ import annotations
+
+import re
+
+TRAJECTORY = "trajectory.txt"
+"""Every frame's pose, TUM format (formats.trajectory)."""
+KEYFRAMES = "keyframes.txt"
+"""The keyframes' poses, TUM format."""
+MAP = "map.ply"
+"""The dense map (formats.ply)."""
+METRICS = "metrics.json"
+CONFIG = "config.json"
+"""The full config snapshot the run used."""
+GROUNDTRUTH_ALIGNED = "groundtruth_aligned.txt"
+"""Ground truth expressed in the estimate's frame (only when the sequence has ground truth)."""
+FRAME_STATS = "frame_stats.csv"
+"""Per-frame figures (formats.frame_stats)."""
+LOG = "log.txt"
+"""The worker's log lines of the job."""
+PREVIEW = "preview.png"
+"""The top view of the trajectory the dashboard shows before the 3D viewer loads."""
+
+PIPELINE_OUTPUTS = (TRAJECTORY, KEYFRAMES, MAP, METRICS, CONFIG)
+"""What every pipeline run writes (``vtdslam run`` and a job alike)."""
+
+_FRAME_IMAGE = re.compile(r"^frame_(\d{6,})_([a-z]+)\.(jpg|png)$")
+
+
+def frame_image(index: int, kind: str) -> str:
+    """The name of frame ``index``'s preview image of ``kind`` (rgb, mask, restored)."""
+    return f"frame_{index:06d}_{kind}.jpg"
+
+
+def parse_frame_image(name: str) -> tuple[int, str] | None:
+    """(index, kind) of a :func:`frame_image` name (``.png`` accepted too); None for any other name."""
+    m = _FRAME_IMAGE.match(name)
+    return (int(m.group(1)), m.group(2)) if m else None
