@@ -20,6 +20,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from formats import artifacts
+from formats.frame_stats import write_frame_stats
+from formats.ply import write_ply
 from worker.slam.config import PipelineConfig
 from worker.slam.dynamic.stage import CullingStage, SegmentationStage
 from worker.slam.errors import ConfigError, EvaluationError, SlamError
@@ -28,10 +31,9 @@ from worker.slam.inpainting.stage import RestorationStage
 from worker.slam.io.sequence import Sequence
 from worker.slam.io.trajectory import Trajectory, write_tum_trajectory
 from worker.slam.map.map import Map
-from worker.slam.mapping.dense import fuse_keyframes
+from worker.slam.mapping.dense_map import build_dense_map
 from worker.slam.mapping.local_mapping import LocalMapper
 from worker.slam.mapping.loop_closure import LoopCloser
-from worker.slam.mapping.ply import write_ply
 from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPose, build_stages, register_stage
 from worker.slam.tracking.result import TrackResult
 from worker.slam.tracking.tracker import Tracker
@@ -160,9 +162,8 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     kf_traj = Trajectory(np.array([kf.timestamp for kf in smap.keyframes]), smap.poses())
     cloud = None
     if config.dense.enabled and len(smap):
-        cloud = fuse_keyframes(smap.keyframes, camera.K, config.dense.stride, config.dense.voxel_m,
-                               config.dense.max_depth_m, np.asarray(camera.dist) if camera.has_distortion else None,
-                               config.dense.edge_rel)
+        cloud = build_dense_map(smap.keyframes, camera.K,
+                                np.asarray(camera.dist) if camera.has_distortion else None, config.dense)
         timer("dense", t)
     metrics = {
         "frames": total, "tracked": int(tracked.sum()), "lost": int((~tracked).sum()),
@@ -244,30 +245,18 @@ class _PreviewPicker:
 def write_outputs(result: RunResult, config: PipelineConfig, out: Path) -> None:
     """trajectory.txt, keyframes.txt (TUM), map.ply, metrics.json, config.json."""
     out.mkdir(parents=True, exist_ok=True)
-    write_tum_trajectory(out / "trajectory.txt", result.trajectory, header="VTD-SLAM trajectory T_WC (every frame)")
-    write_tum_trajectory(out / "keyframes.txt", result.keyframes, header="VTD-SLAM keyframes T_WC")
+    write_tum_trajectory(out / artifacts.TRAJECTORY, result.trajectory, header="VTD-SLAM trajectory T_WC (every frame)")
+    write_tum_trajectory(out / artifacts.KEYFRAMES, result.keyframes, header="VTD-SLAM keyframes T_WC")
     xyz, rgb = result.cloud if result.cloud is not None else (np.zeros((0, 3)), np.zeros((0, 3), np.uint8))
-    write_ply(out / "map.ply", xyz, rgb)
-    (out / "metrics.json").write_text(json.dumps(result.metrics, indent=2))
-    (out / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
+    write_ply(out / artifacts.MAP, xyz, rgb)
+    (out / artifacts.METRICS).write_text(json.dumps(result.metrics, indent=2))
+    (out / artifacts.CONFIG).write_text(json.dumps(config.to_dict(), indent=2))
     if result.aligned_groundtruth is not None:
-        write_tum_trajectory(out / "groundtruth_aligned.txt", result.aligned_groundtruth,
+        write_tum_trajectory(out / artifacts.GROUNDTRUTH_ALIGNED, result.aligned_groundtruth,
                              header="ground truth T_WC aligned onto the estimate (SE(3) Umeyama)")
-    _write_frame_stats(out / "frame_stats.csv", result.frame_stats)
+    write_frame_stats(out / artifacts.FRAME_STATS, result.frame_stats)
     for index, images in result.previews.items():
         for kind, img in images.items():
-            cv2.imwrite(str(out / f"frame_{index:06d}_{kind}.jpg"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR),
+            cv2.imwrite(str(out / artifacts.frame_image(index, kind)), cv2.cvtColor(img, cv2.COLOR_RGB2BGR),
                         [cv2.IMWRITE_JPEG_QUALITY, 85])
-
-
-def _write_frame_stats(path: Path, rows: list[dict]) -> None:
-    import csv
-
-    keys = ["frame_index", "timestamp", "tracked", "ate_error", "features", "matched_points"]
-    keys += sorted({k for r in rows for k in r} - set(keys))
-    with path.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=keys)
-        writer.writeheader()
-        for r in rows:
-            writer.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in keys})
 
