@@ -12,6 +12,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from backend.api import batches, health, job_files, jobs, presets, sequences
 from backend.api.deps import document_auth
+from backend.api.docs import include_docs
 from backend.api.errors import install_error_handlers
 from backend.api.pages import include_dashboard
 from storage.artifacts import ArtifactStore
@@ -84,6 +85,8 @@ def create_app(
         version=VERSION,
         description=DESCRIPTION,
         lifespan=lifespan,
+        docs_url=None,  # /docs and /redoc come from include_docs: assets served here, not from a CDN
+        redoc_url=None,
         openapi_tags=[
             {"name": "sequences", "description": "RGB-D sequences in the TUM layout"},
             {"name": "jobs", "description": "pipeline runs, their progress and outputs"},
@@ -102,7 +105,8 @@ def create_app(
     for module in (health, presets, sequences, jobs, job_files, batches):
         api.include_router(module.router)
     app.include_router(api)
-    include_dashboard(app)  # dashboard pages, /static and the viewer endpoint
+    include_dashboard(app)  # dashboard pages, /static, the viewer endpoint and its /viewer/ proxy
+    include_docs(app)
     document_auth(app, required=bool(settings.api_token))
     if settings.cors_origins:  # off by default: no cross-origin browser access unless configured
         app.add_middleware(
