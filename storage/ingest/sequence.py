@@ -1,6 +1,6 @@
-"""Validating a TUM-layout sequence folder before it is accepted (stdlib only: the api stays light).
+"""Validating a TUM-layout sequence folder before it is accepted (stdlib + formats: the api stays light).
 
-Mirrors what the worker's reader will demand (``worker.slam.io``): ``rgb.txt`` and ``depth.txt`` of
+Reads the files with the worker's own parsers (``formats``): ``rgb.txt`` and ``depth.txt`` of
 ``timestamp relative/path`` lines, every listed file present inside the folder, colour/depth pairs
 associated like TUM's associate.py, an optional ``groundtruth.txt`` (``t tx ty tz qx qy qz qw``) and
 ``camera.json``, and a sample of images verified: 8-bit colour, 16-bit single-channel PNG depth, one size.
@@ -8,20 +8,21 @@ associated like TUM's associate.py, an optional ``groundtruth.txt`` (``t tx ty t
 
 from __future__ import annotations
 
-import bisect
 import json
-import math
 import os
 import stat
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from typing import Any
 
+from formats.association import MAX_DIFF_S, associate
+from formats.errors import FormatError
+from formats.trajectory import parse_tum_trajectory
+from formats.tum_lists import parse_list
 from storage.errors import InvalidInput
 from storage.ingest.images import check_image
 from storage.presets import check_intrinsics
 
-MAX_DIFF_S = 0.02
 PRESET_SIZE = (640, 480)  # every camera preset (storage.presets.CAMERA_PRESETS) is 640x480
 MAX_LIST_BYTES = 64 * 1024 * 1024
 
@@ -82,67 +83,28 @@ def _read_text(folder: Path, path: Path) -> str:
 def read_list(folder: Path, name: str) -> list[tuple[float, str]]:
     """A TUM list file, time-sorted; every listed path must be a regular file inside ``folder``."""
     path = folder / name
-    entries: list[tuple[float, str]] = []
+    try:
+        listed = parse_list(_read_text(folder, path))
+    except FormatError as exc:
+        raise _err(folder, path, exc.message, exc.line) from None
     real_folder = folder.resolve()
     inside: dict[PurePosixPath, bool] = {}  # per listed sub-folder: does it stay inside (no symlink out)?
-    for lineno, line in enumerate(_read_text(folder, path).splitlines(), 1):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        parts = s.split()
-        if len(parts) < 2:
-            raise _err(folder, path, f"expected 'timestamp filename', got {s[:80]!r}", lineno)
-        try:
-            t = float(parts[0])
-        except ValueError:
-            raise _err(folder, path, f"timestamp {parts[0][:40]!r} is not a number", lineno) from None
-        if not math.isfinite(t):
-            raise _err(folder, path, "timestamp is not finite", lineno)
-        rel = PurePosixPath(parts[1])
-        if rel.is_absolute() or ".." in rel.parts or "\\" in parts[1] or "\x00" in parts[1]:
-            raise _err(folder, path, f"path {parts[1][:80]!r} must be relative and stay inside the sequence", lineno)
+    for entry in listed:
+        rel, lineno, shown = PurePosixPath(entry.path), entry.line, entry.path[:80]
         try:
             if rel.parent not in inside:  # a symlinked sub-folder of a registered folder may point anywhere
                 inside[rel.parent] = folder.joinpath(*rel.parent.parts).resolve().is_relative_to(real_folder)
             st = os.lstat(folder.joinpath(*rel.parts))
         except (FileNotFoundError, NotADirectoryError):
-            raise _err(folder, path, f"listed file {parts[1][:80]!r} is missing", lineno) from None
+            raise _err(folder, path, f"listed file {shown!r} is missing", lineno) from None
         except (OSError, RuntimeError) as exc:  # name too long, symlink loop (RuntimeError before 3.13), …
             reason = getattr(exc, "strerror", None) or "symlink loop"
-            raise _err(folder, path, f"listed file {parts[1][:80]!r} is unusable ({reason})", lineno) from None
+            raise _err(folder, path, f"listed file {shown!r} is unusable ({reason})", lineno) from None
         if not inside[rel.parent]:
-            raise _err(folder, path, f"listed file {parts[1][:80]!r} lies outside the sequence folder", lineno)
+            raise _err(folder, path, f"listed file {shown!r} lies outside the sequence folder", lineno)
         if not stat.S_ISREG(st.st_mode):
-            raise _err(folder, path, f"listed file {parts[1]!r} is not a regular file", lineno)
-        entries.append((t, rel.as_posix()))
-    if not entries:
-        raise _err(folder, path, "lists no frames")
-    entries.sort(key=lambda e: e[0])
-    return entries
-
-
-def associate(a: list[float], b: list[float], max_diff: float = MAX_DIFF_S) -> list[tuple[int, int]]:
-    """Pairs (i, j) with |a[i] - b[j]| < max_diff, each index once, closest first (TUM associate.py)."""
-    order = sorted(range(len(b)), key=lambda k: b[k])
-    bs = [b[k] for k in order]
-    cand = []
-    for i, t in enumerate(a):
-        lo, hi = bisect.bisect_left(bs, t - max_diff), bisect.bisect_right(bs, t + max_diff)
-        for k in range(lo, hi):
-            d = abs(t - bs[k])
-            if d < max_diff:
-                cand.append((d, i, order[k]))
-    cand.sort()
-    used_a: set[int] = set()
-    used_b: set[int] = set()
-    pairs = []
-    for _, i, j in cand:
-        if i not in used_a and j not in used_b:
-            used_a.add(i)
-            used_b.add(j)
-            pairs.append((i, j))
-    pairs.sort()
-    return pairs
+            raise _err(folder, path, f"listed file {entry.path!r} is not a regular file", lineno)
+    return [(e.timestamp, e.path) for e in listed]
 
 
 def read_groundtruth(folder: Path) -> int:
@@ -150,22 +112,10 @@ def read_groundtruth(folder: Path) -> int:
     path = folder / "groundtruth.txt"
     if not path.exists():
         return 0
-    n = 0
-    for lineno, line in enumerate(_read_text(folder, path).splitlines(), 1):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        parts = s.replace(",", " ").split()
-        try:
-            values = [float(p) for p in parts]
-        except ValueError:
-            raise _err(folder, path, "expected 8 numbers 't tx ty tz qx qy qz qw'", lineno) from None
-        if len(values) != 8 or not all(math.isfinite(v) for v in values):
-            raise _err(folder, path, "expected 8 finite numbers 't tx ty tz qx qy qz qw'", lineno)
-        if sum(q * q for q in values[4:]) < 1e-12:
-            raise _err(folder, path, "quaternion is zero", lineno)
-        n += 1
-    return n
+    try:
+        return len(parse_tum_trajectory(_read_text(folder, path)))
+    except FormatError as exc:
+        raise _err(folder, path, exc.message, exc.line) from None
 
 
 def read_camera_file(folder: Path) -> dict[str, Any] | None:

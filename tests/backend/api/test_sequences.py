@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from formats.tum_lists import MAX_LIST_LINES
 from storage.db import make_engine, make_session_factory
 from storage.repositories import sequences
 from tests.backend.api.conftest import leftovers, upload
@@ -140,6 +141,8 @@ BAD_FOLDERS = {
         "\n".join(f"{500 + i} {p.relative_to(f)}" for i, p in enumerate(sorted((f / "depth").iterdir())))),
         "no rgb/depth pairs"),
     "bad groundtruth": (lambda f: (f / "groundtruth.txt").write_text("1 2 3\n"), "groundtruth.txt:1"),
+    "zero quaternion": (lambda f: (f / "groundtruth.txt").write_text("1 2 3 4 0 0 0 0\n"), "not unit length"),
+    "too many lines": (lambda f: (f / "rgb.txt").write_text("# x\n" * (MAX_LIST_LINES + 1)), "at most 100000"),
     "bad camera.json": (lambda f: (f / "camera.json").write_text('{"fx": 0, "fy": 1, "cx": 1, "cy": 1}'),
                         "camera.json: camera fx must be positive"),
     "corrupt png": (_corrupt_png, "corrupt"),
