@@ -24,3 +24,8 @@ def test_doc_assets_are_served(client, name):
     assert r.status_code == 200 and len(r.content) > 10_000
     kind = "css" if name.endswith(".css") else "javascript"
     assert kind in r.headers["content-type"]
+
+
+def test_redoc_script_makes_no_outside_request(client):
+    script = client.get("/docs-static/redoc.standalone.js").text
+    assert "cdn.redoc.ly" not in script and "Redoc" in script

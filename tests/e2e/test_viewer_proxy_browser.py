@@ -1,0 +1,208 @@
+"""A run's 3D viewer and the API docs in headless Chromium, with the service on a non-loopback-default host.
+
+`vtdslam serve --host 127.0.0.2 --no-worker` (a second loopback address: Linux routes all of 127/8 without
+setup) stands in for a LAN address: nothing may listen on 127.0.0.1, and the browser must reach the run's
+viser scene through the api's own origin (``/viewer/{job_id}/`` and its WebSocket), one port only.
+``/docs`` and ``/redoc`` must render with every request off that origin aborted (offline).
+
+No worker: the run's artifacts are written straight into the data dir, which is all the viewer reads.
+Needs Playwright's Python package and Debian's ``chromium``; skipped without them.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import urlsplit
+
+import httpx
+import pytest
+
+from storage.artifacts import ArtifactStore
+from tests.backend.api.data import tar_gz, write_sequence
+from tests.webui.test_viewer import write_run
+
+ROOT = Path(__file__).resolve().parents[2]
+CHROMIUM = os.environ.get("VTD_TEST_CHROMIUM", "/usr/bin/chromium")
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--enable-unsafe-swiftshader"]
+HOST = "127.0.0.2"
+START_TIMEOUT_S = 60
+SCENE_TIMEOUT_MS = 60_000  # viser's first scene messages; SwiftShader and a shared CPU are slow
+
+pytestmark = pytest.mark.slow
+
+
+def _free_port(host: str) -> int:
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+def _listening(host: str, port: int) -> bool:
+    try:
+        socket.create_connection((host, port), timeout=1).close()
+    except OSError:
+        return False
+    return True
+
+
+@dataclass
+class Service:
+    """`vtdslam serve --host HOST --no-worker` on free ports and a temp data dir."""
+
+    tmp: Path
+    port: int = field(default_factory=lambda: _free_port(HOST))
+    viewer_port: int = field(default_factory=lambda: _free_port(HOST))
+    proc: subprocess.Popen[bytes] | None = None
+
+    @property
+    def base(self) -> str:
+        return f"http://{HOST}:{self.port}"
+
+    @property
+    def data_dir(self) -> Path:
+        return self.tmp / "data"
+
+    def start(self) -> None:
+        clean = {k: v for k, v in os.environ.items() if not k.startswith("VTD_") or k.startswith("VTD_TEST_")}
+        env = {**clean, "VTD_DATA_DIR": str(self.data_dir), "VTD_VIEWER_PORT": str(self.viewer_port),
+               "PYTHONUNBUFFERED": "1"}
+        self.log = open(self.tmp / "service.log", "wb")  # noqa: SIM115 (closed in stop)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "cli.main", "serve", "--host", HOST, "--port", str(self.port), "--no-worker"],
+            cwd=ROOT, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while time.monotonic() < deadline:
+            assert self.proc.poll() is None, self.tail()
+            if _listening(HOST, self.port) and _listening(HOST, self.viewer_port):
+                return
+            time.sleep(0.2)
+        raise AssertionError("the service did not come up\n" + self.tail())
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(40)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.log.close()
+
+    def tail(self) -> str:
+        self.log.flush()
+        return (self.tmp / "service.log").read_text(errors="replace")[-5000:]
+
+
+@pytest.fixture(scope="module")
+def playwright_api():
+    api = pytest.importorskip("playwright.sync_api", reason="Playwright's Python package is not installed")
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no Chromium at {CHROMIUM} (apt-get install chromium)")
+    return api
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory, playwright_api) -> Iterator[Service]:
+    svc = Service(tmp_path_factory.mktemp("proxy"))
+    svc.start()
+    try:
+        yield svc
+    finally:
+        svc.stop()
+
+
+@pytest.fixture(scope="module")
+def job_id(service: Service, tmp_path_factory: pytest.TempPathFactory) -> str:
+    """A queued job (no worker runs it) whose run artifacts are in place, as a finished run leaves them."""
+    tmp = tmp_path_factory.mktemp("seq")
+    archive = tar_gz(write_sequence(tmp / "rgbd_dataset_proxy", n=3), tmp / "s.tgz", top="rgbd_dataset_proxy")
+    with httpx.Client(base_url=f"{service.base}/api/v1", timeout=30) as api:
+        r = api.post("/sequences", files={"file": ("s.tgz", archive.read_bytes(), "application/gzip")},
+                     data={"camera": "tum1"})
+        assert r.status_code == 201, r.text
+        r = api.post("/jobs", json={"sequence_id": r.json()["id"], "preset": "orb-only"})
+        assert r.status_code == 201, r.text
+    job = r.json()["id"]
+    write_run(ArtifactStore(service.data_dir).job_dir(job))
+    return job
+
+
+@pytest.fixture
+def page(playwright_api, service: Service) -> Iterator[tuple[object, list[str], list[str]]]:
+    """A Chromium page, the console errors and page errors it logs, and every URL it requested."""
+    errors: list[str] = []
+    requested: list[str] = []
+    with playwright_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
+        pg = browser.new_page()
+        pg.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
+        pg.on("pageerror", lambda exc: errors.append(str(exc)))
+        pg.on("request", lambda req: requested.append(req.url))
+        try:
+            yield pg, errors, requested
+        finally:
+            browser.close()
+
+
+def _off_origin(urls: list[str], service: Service) -> list[str]:
+    own = f"{HOST}:{service.port}"
+    return [u for u in urls if urlsplit(u).scheme in ("http", "https", "ws", "wss") and urlsplit(u).netloc != own]
+
+
+def test_everything_binds_the_host_it_was_told(service: Service) -> None:
+    assert _listening(HOST, service.port) and _listening(HOST, service.viewer_port)
+    assert not _listening("127.0.0.1", service.port) and not _listening("127.0.0.1", service.viewer_port)
+
+
+def test_the_runs_viewer_opens_through_the_apis_origin(page, service: Service, job_id: str) -> None:
+    pg, errors, requested = page
+    r = httpx.get(f"{service.base}/api/v1/jobs/{job_id}/viewer", timeout=30)
+    assert r.status_code == 200, r.text
+    url = r.json()["url"]
+    assert url == f"/viewer/{job_id}/"
+    frames: list[int] = []
+    sockets: list[str] = []
+
+    def on_socket(ws) -> None:  # noqa: ANN001 (Playwright's WebSocket)
+        sockets.append(ws.url)
+        ws.on("framereceived", lambda payload: frames.append(len(payload)))
+
+    pg.on("websocket", on_socket)
+    pg.goto(service.base + url, wait_until="load")
+    deadline = time.monotonic() + SCENE_TIMEOUT_MS / 1000
+    while not frames and time.monotonic() < deadline:
+        pg.wait_for_timeout(250)
+    assert frames, f"no scene message through the proxy; sockets {sockets}, errors {errors}\n{service.tail()}"
+    assert sockets == [f"ws://{HOST}:{service.port}/viewer/{job_id}"]
+    pg.wait_for_selector("canvas", timeout=SCENE_TIMEOUT_MS)
+    pg.wait_for_timeout(2000)  # let the first frames render before judging the console
+    assert not _off_origin(requested + sockets, service)
+    assert not errors, errors
+
+
+@pytest.mark.parametrize(("path", "rendered"), [("/docs", ".swagger-ui .opblock"), ("/redoc", "[role=menuitem]")])
+def test_api_docs_render_offline(page, service: Service, path: str, rendered: str) -> None:
+    pg, errors, requested = page
+    blocked: list[str] = []
+
+    def only_local(route) -> None:  # noqa: ANN001 (Playwright's Route)
+        if urlsplit(route.request.url).hostname == HOST:
+            route.continue_()
+        else:
+            blocked.append(route.request.url)
+            route.abort()
+
+    pg.route("**/*", only_local)
+    pg.goto(service.base + path, wait_until="load")
+    pg.wait_for_selector(rendered, timeout=30_000)
+    assert "VTD-SLAM" in pg.title()
+    assert blocked == [] and not _off_origin(requested, service)
+    assert not errors, errors
