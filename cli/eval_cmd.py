@@ -7,6 +7,8 @@ from typing import Annotated
 
 import typer
 
+_RPE_MODES = ("all-pairs", "fixed-delta")
+
 
 def register(app: typer.Typer) -> None:
     app.command("eval")(eval_command)
@@ -16,14 +18,23 @@ def eval_command(
     groundtruth: Annotated[Path, typer.Argument(help="Ground-truth TUM trajectory (t tx ty tz qx qy qz qw).")],
     estimate: Annotated[Path, typer.Argument(help="Estimated TUM trajectory.")],
     as_json: Annotated[bool, typer.Option("--json", help="Print the metrics as JSON.")] = False,
-    max_diff: Annotated[float, typer.Option(help="Max timestamp difference for association (s).")] = 0.02,
-    rpe_delta: Annotated[float, typer.Option(help="RPE interval in seconds.")] = 1.0,
+    max_diff: Annotated[float, typer.Option(help="Max timestamp difference for the ATE's association (s).")] = 0.02,
+    rpe_mode: Annotated[str, typer.Option(
+        help="RPE pairs, as TUM evaluate_rpe.py: 'all-pairs' (the script's default; every pair, i.e. its "
+             "--max_pairs 0) or 'fixed-delta' (its --fixed_delta: each pose with the one --rpe-delta seconds "
+             "later, the drift per interval that a run's metrics.json reports).")] = "all-pairs",
+    rpe_delta: Annotated[float, typer.Option(help="RPE interval in seconds (fixed-delta mode).")] = 1.0,
 ) -> None:
-    """ATE (SE(3)-aligned, no scale, as TUM evaluate_ate) and RPE per second (as TUM evaluate_rpe), via evo."""
-    from worker.slam.evaluation.metrics import evaluate
+    """ATE (SE(3)-aligned, no scale, as TUM evaluate_ate, via evo) and RPE as TUM evaluate_rpe."""
+    from worker.slam.evaluation.metrics import RpeMode, evaluate
     from worker.slam.io.trajectory import read_tum_trajectory
 
-    result = evaluate(read_tum_trajectory(groundtruth), read_tum_trajectory(estimate), max_diff, rpe_delta)
+    if rpe_mode not in _RPE_MODES:
+        raise typer.BadParameter(f"must be one of {', '.join(_RPE_MODES)}", param_hint="--rpe-mode")
+    if rpe_delta <= 0:
+        raise typer.BadParameter("must be positive", param_hint="--rpe-delta")
+    result = evaluate(read_tum_trajectory(groundtruth), read_tum_trajectory(estimate), max_diff, rpe_delta,
+                      RpeMode(rpe_mode))
     if as_json:
         typer.echo(json.dumps(result.to_dict(), indent=2))
         return
@@ -31,11 +42,11 @@ def eval_command(
     a = result.ate
     typer.echo(f"ATE  (m)             rmse {a.rmse:.4f}  mean {a.mean:.4f}  median {a.median:.4f}  "
                f"std {a.std:.4f}  max {a.max:.4f}")
-    if result.rpe_trans is not None and result.rpe_rot is not None:
-        t, r = result.rpe_trans, result.rpe_rot
-        typer.echo(f"RPE trans (m/{rpe_delta:g}s)   rmse {t.rmse:.4f}  mean {t.mean:.4f}  median {t.median:.4f}  "
-                   f"max {t.max:.4f}")
-        typer.echo(f"RPE rot (deg/{rpe_delta:g}s)   rmse {r.rmse:.3f}  mean {r.mean:.3f}  median {r.median:.3f}  "
-                   f"max {r.max:.3f}")
-    else:
-        typer.echo(f"RPE                  n/a (trajectory shorter than {rpe_delta:g} s)")
+    if result.rpe is None:
+        typer.echo("RPE                  n/a (fewer than 2 pose pairs)")
+        return
+    t, r = result.rpe.trans, result.rpe.rot_deg
+    per = f"/{rpe_delta:g}s" if result.rpe.delta_s is not None else ", all pairs"
+    typer.echo(f"RPE pairs            {result.rpe.pairs} ({result.rpe.mode.value})")
+    typer.echo(f"RPE trans (m{per})   rmse {t.rmse:.4f}  mean {t.mean:.4f}  median {t.median:.4f}  max {t.max:.4f}")
+    typer.echo(f"RPE rot (deg{per})   rmse {r.rmse:.3f}  mean {r.mean:.3f}  median {r.median:.3f}  max {r.max:.3f}")

@@ -24,7 +24,7 @@ def test_golden_ate(shared, folder, estimate, rmse, matched):
     result = evaluate(read_tum_trajectory(d / "groundtruth.txt"), read_tum_trajectory(d / estimate))
     assert result.matched == matched
     assert abs(result.ate.rmse - rmse) <= 0.0001
-    assert result.rpe_trans is not None and result.rpe_trans.rmse > 0
+    assert result.rpe is not None and result.rpe.trans.rmse > 0 and result.rpe.delta_s == 1.0
 
 
 @pytest.mark.parametrize("folder,estimate,rmse,matched", GOLDEN)
@@ -51,7 +51,9 @@ def test_rigidly_moved_copy_has_zero_ate():
     T[:3, :3] = Rotation.from_euler("xyz", [10, 20, 30], degrees=True).as_matrix()
     T[:3, 3] = [1, 2, 3]
     r = evaluate(gt, Trajectory(gt.timestamps, T @ gt.poses))
-    assert r.ate.rmse < 1e-9 and r.rpe_trans.rmse < 1e-9 and r.rpe_rot.rmse < 1e-6
+    assert r.rpe is not None
+    # TUM's angle is arccos((tr R - 1) / 2), which cannot resolve much below 1e-8 rad (~1e-6 deg)
+    assert r.ate.rmse < 1e-9 and r.rpe.trans.rmse < 1e-9 and r.rpe.rot_deg.rmse < 1e-5
 
 
 def test_known_offset_error():
@@ -75,6 +77,32 @@ def test_no_overlap_is_an_error():
         evaluate(gt, Trajectory(gt.timestamps + 1000, gt.poses))
 
 
+def test_an_estimate_that_never_moved_is_an_evaluation_error():
+    """A lost tracker repeats one pose: the rigid alignment is undefined, which must be a domain error that
+    says so (the pipeline keeps the run's outputs on EvaluationError), not evo's GeometryException."""
+    gt = _random_walk()
+    frozen = Trajectory(gt.timestamps, np.tile(np.eye(4), (len(gt), 1, 1)))
+    with pytest.raises(EvaluationError, match="never moved") as info:
+        evaluate(gt, frozen)
+    assert info.value.detail == {"reason": "degenerate_alignment"}
+
+
+def test_cli_degenerate_estimate_is_bad_input(tmp_path, capsys):
+    import sys
+
+    from cli.errors import run_with_error_mapping
+    gt = _random_walk()
+    write_tum_trajectory(tmp_path / "gt.txt", gt)
+    write_tum_trajectory(tmp_path / "est.txt", Trajectory(gt.timestamps, np.tile(np.eye(4), (len(gt), 1, 1))))
+    old = sys.argv
+    sys.argv = ["vtdslam", "eval", str(tmp_path / "gt.txt"), str(tmp_path / "est.txt")]
+    try:
+        assert run_with_error_mapping(app) == 2
+    finally:
+        sys.argv = old
+    assert "alignment is undefined" in capsys.readouterr().err
+
+
 def test_roundtrip(tmp_path):
     gt = _random_walk()
     write_tum_trajectory(tmp_path / "t.txt", gt)
@@ -89,8 +117,9 @@ def test_bad_trajectory_line(tmp_path):
 
 
 def test_cli_bad_input_exit_code(tmp_path, capsys):
-    from cli.errors import run_with_error_mapping
     import sys
+
+    from cli.errors import run_with_error_mapping
     (tmp_path / "t.txt").write_text("garbage\n")
     old = sys.argv
     sys.argv = ["vtdslam", "eval", str(tmp_path / "t.txt"), str(tmp_path / "t.txt")]
