@@ -6,24 +6,29 @@ from pathlib import Path
 
 import numpy as np
 
+from formats import artifacts
+from formats.trajectory import parse_tum_trajectory
+
 SIZE = 480
 MARGIN = 30
 
 
 def _read_xyz(path: Path) -> np.ndarray:
-    """(N, 3) positions of a TUM trajectory file (``t tx ty tz qx qy qz qw``); empty if none."""
-    rows = [line.split() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
-    return np.array([[float(r[1]), float(r[2]), float(r[3])] for r in rows if len(r) >= 8]).reshape(-1, 3)
+    """(N, 3) camera positions of a TUM trajectory file; empty when there is no file or no pose. A malformed
+    file raises formats' FormatError."""
+    if not path.is_file():
+        return np.zeros((0, 3))
+    return parse_tum_trajectory(path.read_text(encoding="utf-8", errors="replace"), path).positions
 
 
-def write_trajectory_preview(out_dir: Path, name: str = "preview.png") -> Path | None:
-    """Draw ``trajectory.txt`` (and ``keyframes.txt``) of ``out_dir`` into ``out_dir/name``; None if empty."""
+def write_trajectory_preview(out_dir: Path, name: str = artifacts.PREVIEW) -> Path | None:
+    """Draw the trajectory (and keyframes) of ``out_dir`` into ``out_dir/name``; None with under two poses."""
     import cv2
 
-    traj = _read_xyz(out_dir / "trajectory.txt") if (out_dir / "trajectory.txt").is_file() else np.zeros((0, 3))
+    traj = _read_xyz(out_dir / artifacts.TRAJECTORY)
     if len(traj) < 2:
         return None
-    kfs = _read_xyz(out_dir / "keyframes.txt") if (out_dir / "keyframes.txt").is_file() else np.zeros((0, 3))
+    kfs = _read_xyz(out_dir / artifacts.KEYFRAMES)
     xz = traj[:, [0, 2]]
     lo, hi = xz.min(axis=0), xz.max(axis=0)
     scale = (SIZE - 2 * MARGIN) / max(float((hi - lo).max()), 1e-6)

@@ -12,13 +12,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
+from formats.frame_stats import to_stored
+
 ProgressFn = Callable[[int, int, str], None]
 """(frames_done, frames_total, stage)."""
 CancelFn = Callable[[], bool]
 """True when the run should stop (checked by the pipeline before every frame)."""
-
-OUTPUT_FILES = ("trajectory.txt", "keyframes.txt", "map.ply", "metrics.json", "config.json")
-
 
 class Cancelled(Exception):
     """The run stopped because its cancel check said so."""
@@ -31,7 +30,7 @@ class RunOutput:
     config: dict[str, Any]
     """The full config snapshot the run used."""
     frame_stats: list[dict[str, Any]] = field(default_factory=list)
-    """Per frame: frame_index, timestamp, tracked (and optionally n_features, n_dynamic_removed, ...)."""
+    """Per frame: formats.frame_stats.STORED_COLUMNS (frame_index, timestamp, tracked required)."""
 
 
 class PipelineFn(Protocol):
@@ -77,10 +76,5 @@ def run_slam(
         result = run_pipeline(sequence, config, out_dir, progress=progress, should_cancel=should_cancel)
     except PipelineCancelled as exc:
         raise Cancelled(exc.message) from exc
-    frame_stats = [
-        {"frame_index": r["frame_index"], "timestamp": r["timestamp"], "tracked": r["tracked"],
-         "n_features": r.get("features", 0), "n_dynamic_removed": r.get("features_removed", 0),
-         "ate_error": r.get("ate_error")}
-        for r in result.frame_stats
-    ]
+    frame_stats = [to_stored(r) for r in result.frame_stats]
     return RunOutput(metrics=result.metrics, config=config.to_dict(), frame_stats=frame_stats)

@@ -11,9 +11,7 @@ a huey instance under the queue contract's name (``storage.jobqueue``).
 
 from __future__ import annotations
 
-import csv
 import errno
-import io
 import logging
 import shutil
 import socket
@@ -28,6 +26,8 @@ from typing import Any
 from huey import Huey
 from sqlalchemy.orm import Session, sessionmaker
 
+from formats import artifacts
+from formats.frame_stats import STORED_COLUMNS, format_frame_stats
 from storage.artifacts import ArtifactStore
 from storage.errors import Conflict, NotFound, StorageError
 from storage.jobqueue import register_run_job
@@ -39,7 +39,6 @@ from worker.runner import Cancelled, PipelineFn, RunOutput, run_slam
 
 log = logging.getLogger("worker.tasks")
 
-FRAME_CSV_COLUMNS = ("frame_index", "timestamp", "tracked", "n_features", "n_dynamic_removed", "ate_error")
 FRAME_STATS_CHUNK = 2000
 
 
@@ -266,21 +265,12 @@ def _save_results(ctx: WorkerContext, session: Session, job_id: str, out_dir: Pa
     for path in sorted(out_dir.iterdir()):
         if path.is_file() and not path.name.startswith("."):
             ctx.store.put_file(job_id, path.name, path)
-    if output.frame_stats and not (out_dir / "frame_stats.csv").is_file():  # a pipeline that writes none
-        ctx.store.write_text(job_id, "frame_stats.csv", _frames_csv(output.frame_stats))
+    if output.frame_stats and not (out_dir / artifacts.FRAME_STATS).is_file():  # a pipeline that writes none
+        ctx.store.write_text(job_id, artifacts.FRAME_STATS, format_frame_stats(output.frame_stats, STORED_COLUMNS))
     metrics.save_run_metrics(session, job_id, output.metrics)
     for i in range(0, len(output.frame_stats), FRAME_STATS_CHUNK):
         metrics.add_frame_stats(session, job_id, output.frame_stats[i : i + FRAME_STATS_CHUNK])
     jobs.set_config(session, job_id, output.config)
-
-
-def _frames_csv(rows: list[dict[str, Any]]) -> str:
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=FRAME_CSV_COLUMNS, extrasaction="ignore", lineterminator="\n")
-    writer.writeheader()
-    for row in rows:
-        writer.writerow({k: row.get(k, "") for k in FRAME_CSV_COLUMNS})
-    return buf.getvalue()
 
 
 def _finish(
@@ -302,7 +292,7 @@ def _finish(
         log.warning("job %s: %s", job_id, exc.message)
         return jobs.get(session, job_id).status
     try:
-        ctx.store.write_text(job_id, "log.txt", "\n".join(joblog.lines) + "\n")
+        ctx.store.write_text(job_id, artifacts.LOG, "\n".join(joblog.lines) + "\n")
     except (OSError, StorageError) as exc:
         log.warning("job %s: could not write its log: %s", job_id, exc)
     return status

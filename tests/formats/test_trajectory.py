@@ -10,7 +10,8 @@ from formats.trajectory import TumTrajectory, parse_tum_trajectory, read_tum_tra
 def _random(n: int, seed: int = 0) -> TumTrajectory:
     rng = np.random.default_rng(seed)
     q = rng.normal(size=(n, 4))
-    return TumTrajectory(np.sort(rng.uniform(0, 100, n)), rng.normal(size=(n, 3)), q / np.linalg.norm(q, axis=1)[:, None])
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    return TumTrajectory(np.sort(rng.uniform(0, 100, n)), rng.normal(size=(n, 3)), q)
 
 
 def test_round_trip_to_the_written_precision(tmp_path: Path):

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from formats.artifacts import PIPELINE_OUTPUTS
 from storage.errors import ConfigurationError
 from storage.models import JobStatus, RunMetrics
 from storage.repositories import jobs, metrics, sequences
@@ -15,7 +16,7 @@ from storage.settings import Settings, get_settings
 from worker.consumer import build_context
 from worker.identity import claim_name
 from worker.reaping import reap_orphans, reap_stale, start_reaper
-from worker.runner import OUTPUT_FILES, Cancelled, RunOutput
+from worker.runner import Cancelled, RunOutput
 from worker.tasks import WorkerContext, execute_job
 
 METRICS = {"frames": 3, "fps": 10.0, "tracked": 3, "ate": {"rmse": 0.01}}
@@ -36,7 +37,7 @@ class Pipeline:
             if self.on_frame:
                 self.on_frame(i)
         time.sleep(self.silent_s)  # work that reports nothing (a global bundle adjustment)
-        for name in OUTPUT_FILES:
+        for name in PIPELINE_OUTPUTS:
             (out_dir / name).write_text(json.dumps(METRICS) if name == "metrics.json" else f"# {name}\n")
         stats = [{"frame_index": i, "timestamp": float(i), "tracked": True} for i in range(self.frames)]
         if self.before_return:

@@ -10,13 +10,14 @@ from pathlib import Path
 import pytest
 from huey import SqliteHuey
 
+from formats.artifacts import PIPELINE_OUTPUTS
 from storage.jobqueue import make_enqueue
 from storage.models import JobStatus
 from storage.repositories import jobs, metrics, sequences
 from storage.settings import get_settings
 from tests.backend.api.data import write_sequence
 from worker.consumer import build_context, fail_orphans
-from worker.runner import OUTPUT_FILES, Cancelled, RunOutput
+from worker.runner import Cancelled, RunOutput
 from worker.tasks import WorkerContext, execute_job, register_tasks
 
 METRICS = {"frames": 5, "fps": 12.5, "tracked": 4, "lost": 1, "timings_ms": {"tracking": 3.0},
@@ -48,7 +49,7 @@ class FakePipeline:
             progress(i + 1, self.frames, "tracking")
         if self.error:
             raise self.error
-        for name in OUTPUT_FILES:
+        for name in PIPELINE_OUTPUTS:
             (out_dir / name).write_text(json.dumps(METRICS) if name == "metrics.json" else f"# {name}\n")
         (out_dir / "trajectory.txt").write_text("".join(f"{100 + i / 30} {i * 0.1} 0 {i * i * 0.01} 0 0 0 1\n"
                                                         for i in range(self.frames)))
@@ -86,7 +87,7 @@ def test_success_stores_artifacts_metrics_frame_stats_and_config(ctx, job_id):
     assert call["camera"] == {"preset": "tum1"} and call["overrides"] == {"dense.enabled": False}
     assert call["sequence_dir"] == ctx.store.root / "sequences/s"
     names = {a.name for a in ctx.store.list(job_id)}
-    assert names == {*OUTPUT_FILES, "frame_stats.csv", "log.txt", "preview.png"}
+    assert names == {*PIPELINE_OUTPUTS, "frame_stats.csv", "log.txt", "preview.png"}
     assert ctx.store.path(job_id, "preview.png").read_bytes()[:4] == b"\x89PNG"
     assert ctx.store.path(job_id, "frame_stats.csv").read_text().splitlines()[3].startswith("2,")
     assert "succeeded" in ctx.store.path(job_id, "log.txt").read_text()
@@ -218,7 +219,7 @@ def test_real_pipeline_runs_a_generated_sequence(ctx, job_id):
         assert m.ate_rmse is not None and m.ate_rmse < 0.05
         assert m.rpe_rot_rmse is not None and m.tracked == 20
         assert len(metrics.get_frame_stats(s, job.id)) == 20
-    assert {a.name for a in ctx.store.list(job.id)} >= set(OUTPUT_FILES)
+    assert {a.name for a in ctx.store.list(job.id)} >= set(PIPELINE_OUTPUTS)
     assert _job(ctx, job.id).config["name"] == "orb-only"
 
 

@@ -1,9 +1,9 @@
 """A TUM-layout RGB-D sequence folder (also Bonn, and 7-Scenes with TUM-style lists), read lazily."""
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
