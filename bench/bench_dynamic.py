@@ -29,9 +29,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from worker.slam.camera import parse_camera  # noqa: E402
-from worker.slam.config import get_preset  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.pipeline import run_pipeline  # noqa: E402
+from worker.slam.presets import get_preset  # noqa: E402
 from worker.slam.truth import load_truth, write_background_sequence  # noqa: E402
 
 #: Reference rows (`--references`): label -> (preset, overrides), run on the truth's background frames.

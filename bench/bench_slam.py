@@ -39,9 +39,9 @@ def run_preset(seq_dir: str, camera: str, preset: str, start: int, max_frames: i
                overrides: dict | None) -> dict:
     """Child process: one pipeline run; returns its metrics plus the map check."""
     from worker.slam.camera import parse_camera
-    from worker.slam.config import get_preset
     from worker.slam.io.sequence import Sequence
     from worker.slam.pipeline import run_pipeline
+    from worker.slam.presets import get_preset
 
     seq = Sequence(seq_dir, parse_camera(camera))
     res = run_pipeline(seq, get_preset(preset, overrides), out, start=start, max_frames=max_frames)
@@ -59,9 +59,9 @@ def run_odometry(seq_dir: str, camera: str, start: int, max_frames: int | None) 
 
     from worker.slam.camera import parse_camera
     from worker.slam.evaluation.metrics import evaluate
+    from worker.slam.geometry.se3 import inv, orthonormalize
     from worker.slam.io.sequence import Sequence
     from worker.slam.io.trajectory import Trajectory
-    from worker.slam.geometry.se3 import inv, orthonormalize
 
     seq = Sequence(seq_dir, parse_camera(camera))
     stop = len(seq) if max_frames is None else min(len(seq), start + max_frames)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -15,13 +15,13 @@ def register(app: typer.Typer) -> None:
 def run_command(
     sequence: Annotated[Path, typer.Argument(help="TUM-layout sequence folder (rgb.txt, depth.txt, ...).")],
     out: Annotated[Path, typer.Option("--out", help="Output folder (created).")],
-    camera: Annotated[Optional[str], typer.Option(
+    camera: Annotated[str | None, typer.Option(
         help="Camera preset (tum1, tum2, tum3, bonn, 7scenes) or intrinsics JSON; "
              "the folder's camera.json wins.")] = None,
-    preset: Annotated[Optional[str], typer.Option(help="Pipeline preset (default: the most complete one).")] = None,
-    max_frames: Annotated[Optional[int], typer.Option(help="Process at most this many frames.")] = None,
+    preset: Annotated[str | None, typer.Option(help="Pipeline preset (default: the most complete one).")] = None,
+    max_frames: Annotated[int | None, typer.Option(help="Process at most this many frames.")] = None,
     start: Annotated[int, typer.Option(help="Index of the first frame.")] = 0,
-    config: Annotated[Optional[str], typer.Option(
+    config: Annotated[str | None, typer.Option(
         help='Config overrides as JSON, e.g. \'{"loop.enabled": false}\' or a path to a JSON file.')] = None,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
 ) -> None:
@@ -29,10 +29,10 @@ def run_command(
     from tqdm import tqdm
 
     from worker.slam.camera import parse_camera
-    from worker.slam.config import default_preset, get_preset
     from worker.slam.errors import ConfigError
     from worker.slam.io.sequence import Sequence
     from worker.slam.pipeline import run_pipeline
+    from worker.slam.presets import default_preset, get_preset
 
     overrides = None
     if config:

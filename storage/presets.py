@@ -1,8 +1,7 @@
 """Names the api validates against without importing the pipeline.
 
-The pipeline's registries (``worker.slam.config`` presets, ``worker.slam.camera.PRESETS``) are the truth;
-``tests/backend/api/test_presets.py`` checks these mirrors equal them, so adding a preset there fails the
-suite until it is added here too.
+They come from ``formats.catalog``, the list the pipeline builds its presets and cameras from, so the api and
+the worker cannot disagree.
 """
 
 from __future__ import annotations
@@ -11,16 +10,17 @@ import json
 import math
 from typing import Any
 
+from formats import catalog
 from storage.errors import InvalidInput
 
-PIPELINE_PRESETS: tuple[str, ...] = ("full", "no-restoration", "geometry-only", "orb-only")
-"""Pipeline presets a job may name (``worker.slam.config.preset_names()``)."""
+PIPELINE_PRESETS: tuple[str, ...] = tuple(p.name for p in catalog.PIPELINE_PRESETS)
+"""Pipeline presets a job may name, most complete first."""
 
-DEFAULT_PIPELINE_PRESET = "full"
-"""What a job runs when it names no preset (``worker.slam.config.default_preset()``)."""
+DEFAULT_PIPELINE_PRESET = catalog.DEFAULT_PIPELINE_PRESET
+"""What a job runs when it names no preset."""
 
-CAMERA_PRESETS: tuple[str, ...] = ("7scenes", "bonn", "tum1", "tum2", "tum3")
-"""Camera presets a sequence may name (``worker.slam.camera.PRESETS``)."""
+CAMERA_PRESETS: tuple[str, ...] = tuple(sorted(catalog.CAMERA_PRESETS))
+"""Camera presets a sequence may name."""
 
 _CAMERA_NUMBERS = ("fx", "fy", "cx", "cy", "depth_scale")
 _CAMERA_FIELDS = {*_CAMERA_NUMBERS, "width", "height", "dist", "name"}

@@ -65,9 +65,9 @@ def run_slam(
     stopped it and ``worker.slam.errors.SlamError`` on bad input or configuration.
     """
     from worker.slam.camera import Camera, camera_from_preset
-    from worker.slam.config import get_preset
     from worker.slam.io.sequence import Sequence
     from worker.slam.pipeline import PipelineCancelled, run_pipeline
+    from worker.slam.presets import get_preset
 
     cam = camera_from_preset(camera["preset"]) if "preset" in camera else Camera.from_dict(camera)
     config = get_preset(preset, overrides or None)

@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from formats.catalog import CAMERA_PRESETS
 from worker.slam.errors import CameraError
 
 
@@ -46,7 +47,7 @@ class Camera:
     def has_distortion(self) -> bool:
         return any(abs(d) > 0 for d in self.dist)
 
-    def scaled(self, width: int, height: int) -> "Camera":
+    def scaled(self, width: int, height: int) -> Camera:
         """The same camera at another image size (e.g. a different sensor resolution)."""
         sx, sy = width / self.width, height / self.height
         return replace(self, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy,
@@ -58,7 +59,7 @@ class Camera:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Camera":
+    def from_dict(cls, d: dict) -> Camera:
         known = {f for f in cls.__dataclass_fields__}
         unknown = set(d) - known
         if unknown:
@@ -82,16 +83,10 @@ class Camera:
 
 
 PRESETS: dict[str, Camera] = {
-    # TUM RGB-D (https://cvg.cit.tum.de/data/datasets/rgbd-dataset/file_formats): ROS-default registered depth.
-    "tum1": Camera(517.3, 516.5, 318.6, 255.3, 5000.0, dist=(0.2624, -0.9531, -0.0054, 0.0026, 1.1633), name="tum1"),
-    "tum2": Camera(520.9, 521.0, 325.1, 249.7, 5000.0, dist=(0.2312, -0.7849, -0.0033, -0.0001, 0.9172), name="tum2"),
-    "tum3": Camera(535.4, 539.2, 320.1, 247.6, 5000.0, name="tum3"),
-    # Bonn RGB-D Dynamic (its documented intrinsics; k3 not given).
-    "bonn": Camera(542.822841, 542.576870, 315.593520, 237.756098, 5000.0,
-                   dist=(0.039903, -0.099343, -0.000730, -0.000144, 0.0), name="bonn"),
-    # Microsoft 7-Scenes nominal depth intrinsics; depth in millimetres.
-    "7scenes": Camera(585.0, 585.0, 320.0, 240.0, 1000.0, name="7scenes"),
+    name: Camera(c.fx, c.fy, c.cx, c.cy, c.depth_scale, c.width, c.height, c.dist, name=name)
+    for name, c in CAMERA_PRESETS.items()
 }
+"""The supported datasets' cameras by preset name (their intrinsics live in `formats.catalog`)."""
 
 CAMERA_FILE = "camera.json"
 

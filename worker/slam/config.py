@@ -1,17 +1,16 @@
-"""Pipeline configuration: one typed dataclass per stage, composed into `PipelineConfig`, plus named presets.
+"""Pipeline configuration: one typed dataclass per core section, composed into `PipelineConfig`.
 
 A job stores `PipelineConfig.to_dict()`; `PipelineConfig.from_dict()` rebuilds it (unknown keys are errors).
-Later stages plug in without editing this file:
-
-- `register_section(name, cls)` adds a config section (a dataclass) that `from_dict`/`to_dict` understand;
-- `register_preset(name, factory, description)` adds a named preset (e.g. `geometry-only`, `full`).
+Stages plug their own sections in without editing this file: `register_section(name, cls)` adds a dataclass
+that `from_dict`/`to_dict` understand (`worker.slam.presets` registers the shipped stages' sections, and the
+named presets live there too).
 """
 from __future__ import annotations
 
 import copy
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 from worker.slam.errors import ConfigError
 
@@ -126,6 +125,11 @@ class DenseConfig:
     """Depth beyond this is not fused."""
     edge_rel: float = 0.05
     """Drop pixels whose 3x3 neighbourhood jumps by more than this fraction of depth (flying pixels); 0 keeps all."""
+    method: str = "points"
+    """`points`: back-projected keyframes merged per voxel (keeps every surface ever seen); `tsdf`: a TSDF
+    volume, where later views carve out what moved away (`worker.slam.mapping.tsdf`)."""
+    tsdf_trunc_voxels: float = 4.0
+    """TSDF truncation band in voxels (`method: tsdf`)."""
 
 
 @dataclass
@@ -154,7 +158,7 @@ class PipelineConfig:
     name: str = "custom"
     """Preset this config was built from (informational)."""
     stages: list[str] = field(default_factory=list)
-    """Ordered per-frame stages run before tracking (names registered in `worker.slam.pipeline`)."""
+    """Ordered per-frame stages run before tracking (names registered with `worker.slam.stages.register_stage`)."""
     features: FeatureConfig = field(default_factory=FeatureConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     mapping: MappingConfig = field(default_factory=MappingConfig)
@@ -181,12 +185,12 @@ class PipelineConfig:
         return out
 
     @classmethod
-    def from_dict(cls, d: dict, base: "PipelineConfig | None" = None) -> "PipelineConfig":
+    def from_dict(cls, d: dict, base: PipelineConfig | None = None) -> PipelineConfig:
         """Build from a (possibly partial) snapshot; missing values come from `base` (default: defaults)."""
         cfg = copy.deepcopy(base) if base is not None else cls()
         return cfg.with_overrides(d)
 
-    def with_overrides(self, overrides: dict) -> "PipelineConfig":
+    def with_overrides(self, overrides: dict) -> PipelineConfig:
         """A copy with nested (`{"tracking": {"ratio": 0.8}}`) or dotted (`{"tracking.ratio": 0.8}`) values."""
         cfg = copy.deepcopy(self)
         for key, val in _expand_dotted(overrides).items():
@@ -249,7 +253,7 @@ def _apply(obj: Any, values: dict, where: str) -> Any:
             changes[key] = tuple(val)
         else:
             changes[key] = _coerce(cur, val, f"{where}.{key}")
-    if getattr(type(obj), "__dataclass_params__").frozen:
+    if type(obj).__dataclass_params__.frozen:
         try:
             return dataclasses.replace(obj, **changes)  # runs the section's own checks (__post_init__)
         except ValueError as exc:
@@ -287,68 +291,3 @@ def _coerce(current: Any, val: Any, where: str) -> Any:
         return val
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"invalid value for {where}: {exc}", detail={"field": where}) from exc
-
-
-# ---- presets -------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Preset:
-    name: str
-    description: str
-    factory: Callable[[], PipelineConfig]
-
-
-_PRESETS: dict[str, Preset] = {}
-DEFAULT_PRESET_ORDER = ("full", "no-restoration", "geometry-only", "orb-only")
-
-
-def register_preset(name: str, factory: Callable[[], PipelineConfig], description: str) -> None:
-    """Register (or replace) a named preset. The factory returns a fresh config each call."""
-    _PRESETS[name] = Preset(name, description, factory)
-
-
-def preset_names() -> list[str]:
-    return sorted(_PRESETS)
-
-
-def default_preset() -> str:
-    """`full` once it is registered; until then the most complete registered preset."""
-    for name in DEFAULT_PRESET_ORDER:
-        if name in _PRESETS:
-            return name
-    return preset_names()[0]
-
-
-def get_preset(name: str, overrides: dict | None = None) -> PipelineConfig:
-    if name not in _PRESETS:
-        raise ConfigError(f"unknown preset {name!r}; choose one of {preset_names()}")
-    cfg = _PRESETS[name].factory()
-    cfg.name = name
-    return cfg.with_overrides(overrides) if overrides else cfg
-
-
-def describe_presets() -> dict[str, str]:
-    return {n: p.description for n, p in sorted(_PRESETS.items())}
-
-
-# ---- the dynamic front end's sections and the paper's ablation presets -------------------------------------
-
-def _register_dynamic() -> None:
-    from worker.slam.dynamic.stage import CullingStageConfig, SegmentationStageConfig
-    from worker.slam.inpainting.stage import RestorationStageConfig
-
-    register_section("segmentation", SegmentationStageConfig)
-    register_section("culling", CullingStageConfig)
-    register_section("restoration", RestorationStageConfig)
-
-
-_register_dynamic()
-register_preset("orb-only", lambda: PipelineConfig(name="orb-only"),
-                "ORB-SLAM2-style RGB-D tracking and mapping, no dynamic handling")
-register_preset("geometry-only", lambda: PipelineConfig(name="geometry-only", stages=["culling"]),
-                "epipolar/depth culling of moving clusters, no segmentation, no restoration")
-register_preset("no-restoration", lambda: PipelineConfig(name="no-restoration",
-                                                         stages=["segmentation", "culling"]),
-                "MSNET segmentation + adaptive epipolar culling, no background restoration")
-register_preset("full", lambda: PipelineConfig(name="full", stages=["segmentation", "culling", "restoration"]),
-                "VTD-SLAM: segmentation + culling + PatchMatch restoration with restored features")

@@ -20,21 +20,20 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+import worker.slam.presets  # noqa: F401 - registers the shipped stages and their config sections
 from formats import artifacts
 from formats.frame_stats import write_frame_stats
 from formats.ply import write_ply
 from worker.slam.config import PipelineConfig
-from worker.slam.dynamic.stage import CullingStage, SegmentationStage
 from worker.slam.errors import ConfigError, EvaluationError, SlamError
 from worker.slam.geometry.se3 import inv, orthonormalize
-from worker.slam.inpainting.stage import RestorationStage
 from worker.slam.io.sequence import Sequence
 from worker.slam.io.trajectory import Trajectory, write_tum_trajectory
 from worker.slam.map.map import Map
 from worker.slam.mapping.dense_map import build_dense_map
 from worker.slam.mapping.local_mapping import LocalMapper
 from worker.slam.mapping.loop_closure import LoopCloser
-from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPose, build_stages, register_stage
+from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPose, build_stages
 from worker.slam.tracking.result import TrackResult
 from worker.slam.tracking.tracker import Tracker
 from worker.slam.truth import load_truth
@@ -49,10 +48,6 @@ class PipelineCancelled(SlamError):
     """The run was stopped by its cancellation check."""
 
     code = "cancelled"
-
-
-for _cls in (SegmentationStage, CullingStage, RestorationStage):
-    register_stage(_cls.name, _cls)
 
 
 @dataclass

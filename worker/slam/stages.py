@@ -86,13 +86,12 @@ class StageContext:
 
 
 class FrameStage(Protocol):
+    """A per-frame stage. It may also define `summary() -> dict`: run-level figures that the pipeline stores in
+    metrics.json under the stage's name."""
+
     name: str
 
     def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs: ...
-
-    def summary(self) -> dict:
-        """Run-level figures of the stage (stored in metrics.json under the stage's name)."""
-        ...
 
 
 StageFactory = Callable[[PipelineConfig, Camera], FrameStage]

@@ -1,8 +1,9 @@
-"""The api's preset mirrors (storage.presets) equal the pipeline's registries, and camera specs parse."""
+"""The api's preset names come from formats.catalog, the same list the pipeline builds from; camera specs parse."""
 from __future__ import annotations
 
 import pytest
 
+from formats import catalog
 from storage.errors import InvalidInput
 from storage.presets import (
     CAMERA_PRESETS,
@@ -13,19 +14,24 @@ from storage.presets import (
 )
 
 
-def test_pipeline_presets_mirror_the_pipeline_registry():
-    import worker.slam.pipeline  # noqa: F401 - registers every stage/preset the pipeline ships
-    from worker.slam.config import default_preset, preset_names
+def test_the_pipeline_builds_every_catalog_preset():
+    from worker.slam.presets import default_preset, describe_presets, get_preset
 
-    assert sorted(PIPELINE_PRESETS) == preset_names(), "update storage/presets.py PIPELINE_PRESETS"
-    assert DEFAULT_PIPELINE_PRESET == default_preset(), "update storage/presets.py DEFAULT_PIPELINE_PRESET"
+    assert describe_presets() == {p.name: p.description for p in catalog.PIPELINE_PRESETS}
+    assert list(PIPELINE_PRESETS) == [p.name for p in catalog.PIPELINE_PRESETS]
+    assert DEFAULT_PIPELINE_PRESET == default_preset() == "full"
+    for spec in catalog.PIPELINE_PRESETS:
+        cfg = get_preset(spec.name)
+        assert cfg.name == spec.name and cfg.stages == list(spec.stages)
 
 
-def test_camera_presets_mirror_the_camera_registry():
+def test_the_pipeline_cameras_are_the_catalog_cameras():
     from worker.slam.camera import PRESETS
 
-    assert sorted(CAMERA_PRESETS) == sorted(PRESETS), "update storage/presets.py CAMERA_PRESETS"
+    assert sorted(CAMERA_PRESETS) == sorted(PRESETS) == sorted(catalog.CAMERA_PRESETS)
     assert {(c.width, c.height) for c in PRESETS.values()} == {(640, 480)}  # storage.ingest assumes it
+    tum1 = PRESETS["tum1"]
+    assert (tum1.fx, tum1.depth_scale, tum1.dist[4], tum1.name) == (517.3, 5000.0, 1.1633, "tum1")
 
 
 def test_camera_specs():

@@ -8,11 +8,11 @@ import shutil
 import numpy as np
 import pytest
 
-from worker.slam.config import get_preset
-from worker.slam.errors import ConfigError, SequenceFormatError
 from worker.slam.dynamic.stage import CullingStage
+from worker.slam.errors import ConfigError, SequenceFormatError
 from worker.slam.io.sequence import Sequence
 from worker.slam.pipeline import run_pipeline
+from worker.slam.presets import get_preset
 from worker.slam.synth.generator import SynthConfig, generate_synthetic
 from worker.slam.truth import load_truth
 

@@ -8,9 +8,9 @@ import pytest
 
 from worker.slam.augment.generator import AugmentConfig, generate_augmented
 from worker.slam.camera import camera_from_preset
-from worker.slam.config import get_preset
 from worker.slam.io.sequence import Sequence
 from worker.slam.pipeline import run_pipeline
+from worker.slam.presets import get_preset
 
 FRAMES = 90
 

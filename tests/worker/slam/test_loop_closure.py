@@ -6,14 +6,14 @@ import pytest
 
 from tests.worker.slam.synthetic_room import pose, render
 from worker.slam.camera import Camera
-from worker.slam.config import get_preset
 from worker.slam.evaluation.metrics import evaluate
+from worker.slam.geometry.se3 import exp_se3, inv
 from worker.slam.io.trajectory import Trajectory
 from worker.slam.mapping.local_mapping import LocalMapper
 from worker.slam.mapping.loop_closure import LoopCloser
 from worker.slam.mapping.place_recognition import PlaceRecognizer
 from worker.slam.mapping.pose_graph import optimize_pose_graph
-from worker.slam.geometry.se3 import exp_se3, inv
+from worker.slam.presets import get_preset
 from worker.slam.tracking.tracker import Tracker
 
 CAM = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, name="synthetic")

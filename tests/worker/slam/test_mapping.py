@@ -7,12 +7,13 @@ import pytest
 from formats.ply import read_ply, write_ply
 from tests.worker.slam.synthetic_room import K_SYN, render, trajectory
 from worker.slam.camera import Camera
-from worker.slam.config import MappingConfig, get_preset
+from worker.slam.config import MappingConfig
+from worker.slam.geometry.se3 import exp_se3, inv, pose_distance
+from worker.slam.map.map import Map
 from worker.slam.mapping.dense import fuse_keyframes, voxel_filter
 from worker.slam.mapping.local_ba import local_bundle_adjust
 from worker.slam.mapping.local_mapping import cull_points
-from worker.slam.map.map import Map
-from worker.slam.geometry.se3 import exp_se3, inv, pose_distance
+from worker.slam.presets import get_preset
 from worker.slam.tracking.tracker import Tracker
 
 CAM = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, name="synthetic")

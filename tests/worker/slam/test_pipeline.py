@@ -9,11 +9,12 @@ import pytest
 from formats.ply import read_ply
 from tests.worker.slam.synthetic_room import trajectory, write_sequence
 from worker.slam.camera import PRESETS
-from worker.slam.config import PipelineConfig, get_preset, preset_names, register_preset, register_section
+from worker.slam.config import PipelineConfig, register_section
 from worker.slam.errors import ConfigError
 from worker.slam.io.sequence import Frame, Sequence
 from worker.slam.io.trajectory import read_tum_trajectory
 from worker.slam.pipeline import PipelineCancelled, run_pipeline
+from worker.slam.presets import get_preset, preset_names, register_preset
 from worker.slam.stages import FrameInputs, StageContext, register_stage
 
 
@@ -79,9 +80,10 @@ class _MaskLeftHalf:
 def isolated_registries(monkeypatch):
     """Registrations made by a test vanish after it (other tests compare the real registries)."""
     import worker.slam.config as config_mod
+    import worker.slam.presets as presets_mod
     import worker.slam.stages as stages_mod
 
-    monkeypatch.setattr(config_mod, "_PRESETS", dict(config_mod._PRESETS))
+    monkeypatch.setattr(presets_mod, "_PRESETS", dict(presets_mod._PRESETS))
     monkeypatch.setattr(config_mod, "_SECTIONS", dict(config_mod._SECTIONS))
     monkeypatch.setattr(stages_mod, "_STAGES", dict(stages_mod._STAGES))
 

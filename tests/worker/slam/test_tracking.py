@@ -6,11 +6,12 @@ import pytest
 
 from tests.worker.slam.synthetic_room import K_SYN, pose, render, trajectory
 from worker.slam.camera import Camera
-from worker.slam.config import TrackingConfig, get_preset
+from worker.slam.config import TrackingConfig
 from worker.slam.features.types import Features
 from worker.slam.geometry.pnp import pnp_ransac
 from worker.slam.geometry.pose_optimizer import optimize_pose, pose_entropy
 from worker.slam.geometry.se3 import exp_se3, inv, log_se3, pose_distance, transform
+from worker.slam.presets import get_preset
 from worker.slam.tracking.inputs import TrackInputs
 from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
 from worker.slam.tracking.motion import ConstantVelocityModel

@@ -2,7 +2,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tests.worker.slam.inpainting.scene import K, H, W, pose, render, texture
+from tests.worker.slam.inpainting.scene import H, K, W, pose, render, texture
 from worker.slam.inpainting.patchmatch import patchmatch_fill
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
 from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, restore_frame
@@ -158,7 +158,8 @@ def test_restoration_on_real_7scenes_beats_telea(redkitchen):
 
 
 def test_a_bad_unseen_fill_is_a_config_error():
-    from worker.slam.config import ConfigError, get_preset
+    from worker.slam.errors import ConfigError
+    from worker.slam.presets import get_preset
     with pytest.raises(ConfigError, match="unseen_fill"):
         get_preset("full", {"restoration.restoration.unseen_fill": "magic"})
     assert get_preset("full", {"restoration.restoration.unseen_fill": "patchmatch"}) \

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from worker.slam.errors import ConfigError
-from worker.slam.config import PipelineConfig
+from worker.slam.presets import get_preset
 from worker.slam.segmentation import SegmenterConfig
 from worker.slam.segmentation.guided import guided_upsample
 
@@ -74,4 +74,4 @@ def test_guided_parameters_are_checked() -> None:
     with pytest.raises(ValueError):
         SegmenterConfig(guided_eps=0.0)
     with pytest.raises(ConfigError):
-        PipelineConfig.from_dict({"segmentation": {"segmenter": {"guided_radius": -3}}})
+        get_preset("no-restoration", {"segmentation": {"segmenter": {"guided_radius": -3}}})
