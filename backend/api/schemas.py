@@ -8,6 +8,7 @@ from typing import Annotated, Any, Generic, TypeVar
 from fastapi import Path
 from pydantic import BaseModel, ConfigDict, Field
 
+from formats import artifacts
 from storage.models import Batch, Job, JobStatus, Sequence
 from storage.presets import DEFAULT_PIPELINE_PRESET
 from storage.repositories.batches import ComparisonRow
@@ -23,7 +24,7 @@ _BATCH_ID = "5d4c3b2a1f0e4d9c8b7a6f5e4d3c2b1a"
 SequenceId = Annotated[str, Path(description="A sequence's id.", examples=[_SEQ_ID])]
 JobId = Annotated[str, Path(description="A job's id.", examples=[_JOB_ID])]
 BatchId = Annotated[str, Path(description="A batch's id.", examples=[_BATCH_ID])]
-ArtifactName = Annotated[str, Path(description="A file the run wrote.", examples=["trajectory.txt"])]
+ArtifactName = Annotated[str, Path(description="A file the run wrote.", examples=[artifacts.TRAJECTORY])]
 
 
 class LatestJob(BaseModel):
