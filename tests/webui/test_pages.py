@@ -127,6 +127,35 @@ def test_every_page_renders(client: TestClient, path: str) -> None:
     assert "http://" not in html.replace("http://www.w3.org", "")  # nothing from another origin (no CDN)
 
 
+def test_first_page_shows_runs_before_sequences(client: TestClient) -> None:
+    html = client.get("/").text
+    assert html.index('id="active-runs"') < html.index('id="recent-runs"') < html.index('id="seq-table"')
+    assert "/static/js/activity.js" in html and 'href="/jobs"' in html
+
+
+def test_batch_page_has_plots_truth_and_the_same_result_note(client: TestClient) -> None:
+    html = client.get("/batches/0123456789abcdef").text
+    for box in ("plot-ate", "plot-rpe", "plot-fps", "plot-traj", "truth-compare"):
+        assert f'id="{box}"' in html
+    for metric in ("mask_iou", "feature_precision", "feature_recall", "restoration_psnr", "relocalisations"):
+        assert f'<option value="{metric}"' in html
+    note = html[html.index('id="same-results"'):]
+    assert "restoration.restored_features" in note and "features_removed" in note
+    # the note says full and no-restoration track alike because restored features are off by default
+    from worker.slam.presets import get_preset
+
+    assert get_preset("full").section("restoration").restored_features is False
+    assert get_preset("no-restoration").stages + ["restoration"] == get_preset("full").stages
+    assert get_preset("geometry-only").stages == ["culling"] and get_preset("orb-only").stages == []
+
+
+def test_wide_tables_scroll_inside_their_card(client: TestClient) -> None:
+    for path in PAGES:
+        html = client.get(path).text
+        tables = html.count("<table")
+        assert tables == len(re.findall(r'<div class="scroll">\s*<table', html)), path
+
+
 def test_sequences_page_offers_the_presets(client: TestClient) -> None:
     html = client.get("/sequences").text
     for camera in ("tum1", "tum3", "bonn", "7scenes"):
@@ -143,6 +172,7 @@ def test_ids_in_urls_are_escaped(client: TestClient) -> None:
 @pytest.mark.parametrize("name,ctype", [
     ("css/app.css", "text/css"), ("js/app.js", "javascript"), ("js/sequences.js", "javascript"),
     ("js/jobs.js", "javascript"), ("js/job.js", "javascript"), ("js/batch.js", "javascript"),
+    ("js/activity.js", "javascript"), ("js/plot.js", "javascript"), ("js/batch_plots.js", "javascript"),
 ])
 def test_static_assets_are_served(client: TestClient, name: str, ctype: str) -> None:
     r = client.get(f"/static/{name}")
@@ -171,7 +201,7 @@ def test_include_dashboard_twice_is_harmless(settings: Settings) -> None:
 def test_job_page_weight(client: TestClient) -> None:
     html = client.get("/jobs/0123456789abcdef")
     assets = re.findall(r'(?:href|src)="(/static/[^"?]+)', html.text)
-    assert len(assets) == 3  # app.css, app.js, job.js
+    assert len(assets) == 4  # app.css, app.js, plot.js, job.js
     sizes = {a: len(client.get(a).content) for a in assets}
     total = len(html.content) + sum(sizes.values())
     print(f"\njob page weight: {total} bytes (html {len(html.content)}, " +

@@ -4,10 +4,18 @@
   const { api, el, showError, num, metres, statusBadge, shortId, progressCell, TERMINAL, isNum } = VTD;
   const $ = (id) => document.getElementById(id);
   const main = $("main"), batchId = main.dataset.batchId, baseline = main.dataset.baseline;
-  const LOWER_IS_BETTER = { ate_rmse: true, rpe_trans_rmse: true, rpe_rot_rmse: true, fps: false };
+  const LOWER_IS_BETTER = {
+    ate_rmse: true, rpe_trans_rmse: true, rpe_rot_rmse: true, fps: false, relocalisations: true,
+    mask_iou: false, feature_precision: false, feature_recall: false, restoration_psnr: false,
+  };
+  const pct = (x) => (isNum(x) ? (100 * x).toFixed(1) + " %" : "—");
   const FORMAT = {
     ate_rmse: (x) => num(x, 4), rpe_trans_rmse: (x) => num(x, 4), rpe_rot_rmse: (x) => num(x, 3), fps: (x) => num(x, 2),
+    relocalisations: (x) => num(x, 0), mask_iou: (x) => num(x, 3), feature_precision: pct, feature_recall: pct,
+    restoration_psnr: (x) => num(x, 1),
   };
+  const TRUTH = [["mask_iou", "Mask IoU"], ["feature_precision", "Dyn. feature precision"],
+    ["feature_recall", "Dyn. feature recall"], ["restoration_psnr", "Restoration PSNR (dB)"], ["relocalisations", "Relocalisations"]];
   let batch = null, table = [], timer = null;
 
   function render() {
@@ -52,6 +60,19 @@
     $("batch-note").hidden = !presets.includes(baseline) && presets.length < 2;
   }
 
+  /** Every truth score of every run side by side (the comparison table shows one metric at a time). */
+  function truthTable() {
+    const scored = table.filter((r) => TRUTH.slice(0, 4).some(([k]) => isNum(r[k])));
+    $("truth-card").hidden = !scored.length;
+    if (!scored.length) return;
+    const multi = new Set(table.map((r) => r.sequence_id)).size > 1;
+    $("truth-compare").replaceChildren(
+      el("thead", {}, el("tr", {}, el("th", {}, multi ? "Sequence · preset" : "Preset"), ...TRUTH.map(([, h]) => el("th", { class: "n" }, h)))),
+      el("tbody", {}, ...table.filter((r) => r.status === "succeeded").map((r) => el("tr", {},
+        el("td", {}, el("a", { href: "/jobs/" + r.job_id }, multi ? `${r.sequence_name || r.sequence_id.slice(0, 8)} · ${r.preset}` : r.preset)),
+        ...TRUTH.map(([k]) => el("td", { class: "n" }, FORMAT[k](r[k])))))));
+  }
+
   function jobsTable(names) {
     $("batch-jobs").replaceChildren(...batch.jobs.map((j) => el("tr", {},
       el("td", {}, el("a", { href: "/jobs/" + j.id }, shortId(j.id))),
@@ -66,8 +87,11 @@
       [batch, table] = await Promise.all([api("/batches/" + batchId), api(`/batches/${batchId}/table`)]);
       $("batch-status").replaceChildren(statusBadge(batch.status));
       $("batch-name").textContent = batch.name ? `Comparison: ${batch.name}` : "Comparison";
+      $("batch-title").textContent = batch.name || "";
+      document.title = `${batch.name || "Batch " + batchId.slice(0, 8)} · VTD-SLAM`;
       const names = new Map(table.map((r) => [r.sequence_id, r.sequence_name || r.sequence_id.slice(0, 8)]));
-      render(); jobsTable(names);
+      render(); jobsTable(names); truthTable();
+      VTDBatchPlots.draw(table).catch((err) => showError($("batch-error"), err, "Could not draw the trajectories"));
       showError($("batch-error"), null);
       if (batch.jobs.some((j) => !TERMINAL.has(j.status))) timer = setTimeout(load, 2500);
     } catch (err) {
@@ -77,5 +101,6 @@
     }
   }
   $("metric").addEventListener("change", () => batch && render());
+  VTDBatchPlots.watchChoice(() => table);
   load();
 })();

@@ -2,9 +2,9 @@
 "use strict";
 (() => {
   const { api, el, showError, num, metres, bytes, seconds, when, jobDuration, TERMINAL, statusBadge, followJob, isNum } = VTD;
+  const { parseTum, parseCsv, lineChart, barChart, note } = VTDPlot;
   const $ = (id) => document.getElementById(id);
   const jobId = document.getElementById("main").dataset.jobId;
-  const SVGNS = "http://www.w3.org/2000/svg";
   const COLORS = { est: "#0b6bcb", gt: "#8c959f", err: "#c2410c", bar: "#0b6bcb" };
   let seqInfo = null, resultsShown = false;
 
@@ -34,9 +34,14 @@
       $("job-progress-text").textContent = job.status === "queued" ? "waiting for a worker"
         : `${Math.round(100 * (job.progress || 0))} % · ${job.stage}${eta}`;
     }
-    if (job.status === "failed" || job.status === "cancelled") {
-      showError($("job-error"), new Error(job.error || job.status), job.status === "failed" ? "The run failed" : "Cancelled");
-    } else showError($("job-error"), null);
+    // A failure is an error; a cancel is what someone asked for: said plainly, in the neutral note.
+    if (job.status === "failed") showError($("job-error"), new Error(job.error || "no reason given"), "The run failed");
+    else showError($("job-error"), null);
+    const cancelled = $("job-cancelled");
+    cancelled.hidden = job.status !== "cancelled";
+    cancelled.textContent = job.status === "cancelled"
+      ? `Cancelled${job.frames_done ? ` at frame ${job.frames_done} of ${job.frames_total}` : " before it started"}`
+        + (job.error ? ` (${job.error})` : "") + ". Retry runs it again from the start." : "";
     const acts = [];
     const act = (label, path, method = "POST", after) => el("button", { type: "button", onclick: async () => {
       if (method === "DELETE" && !confirm("Delete this job and its files?")) return;
@@ -77,21 +82,29 @@
     if (m.evaluation_error) t.after(el("p", { class: "muted" }, "No ATE/RPE: " + m.evaluation_error));
   }
 
+  // ---------- scores against truth (sequences made with truth: vtdslam synth / augment) ----------
+  const dig = (o, ...path) => path.reduce((x, k) => (x && typeof x === "object" ? x[k] : undefined), o);
+  const pct = (x) => (isNum(x) ? (100 * x).toFixed(1) + " %" : "—");
+  const TRUTH = [
+    ["Mask IoU", "the culled region against the true moving-object masks", ["culling", "truth", "mask_iou"], (x) => num(x, 3)],
+    ["Dynamic-feature precision", "of the features removed, the share that lay on true movers", ["culling", "truth", "feature_precision"], pct],
+    ["Dynamic-feature recall", "of the features on true movers, the share removed", ["culling", "truth", "feature_recall"], pct],
+    ["Restoration PSNR", "restored pixels against the true background", ["restoration", "truth", "restoration_psnr"], (x) => num(x, 1, "dB")],
+    ["Restored depth, median error", "restored depth against the true background's", ["restoration", "truth", "restoration_depth_median_m"], metres],
+  ];
+  function truthTable(m) {
+    const rows = TRUTH.filter(([, , path]) => isNum(dig(m, ...path)));
+    $("truth-card").hidden = !rows.length;
+    if (!rows.length) return;
+    const scored = dig(m, "culling", "truth", "frames_scored") || {};
+    $("truth-table").replaceChildren(
+      el("thead", {}, el("tr", {}, el("th", {}, "Score"), el("th", { class: "n" }, "Value"), el("th", {}, "What it measures"))),
+      el("tbody", {}, ...rows.map(([label, what, path, fmt]) => el("tr", {},
+        el("td", {}, label), el("td", { class: "n" }, fmt(dig(m, ...path))), el("td", { class: "muted small" }, what)))));
+    $("truth-note").textContent = isNum(scored.mask) ? `Culling scored on ${scored.mask} frames.` : "";
+  }
+
   // ---------- data files ----------
-  function parseTum(text) {
-    const out = [];
-    for (const line of text.split("\n")) {
-      if (!line.trim() || line.startsWith("#")) continue;
-      const v = line.trim().split(/[\s,]+/).map(Number);
-      if (v.length >= 4 && v.slice(0, 4).every(isFinite)) out.push(v);
-    }
-    return out; // [t, x, y, z, qx, qy, qz, qw]
-  }
-  function parseCsv(text) {
-    const lines = text.trim().split("\n");
-    const head = lines.shift().split(",").map((s) => s.trim());
-    return lines.map((l) => { const v = l.split(","); const o = {}; head.forEach((h, i) => { o[h] = v[i]; }); return o; });
-  }
   /** Per-pose error: the frames file's ate_error, else distance to the aligned ground truth at the same time. */
   function perFrameError(est, gt, frames) {
     if (frames && frames.length && frames.some((r) => r.ate_error !== undefined && r.ate_error !== "")) {
@@ -107,103 +120,6 @@
     return out.length ? out : null;
   }
 
-  // ---------- SVG plotting ----------
-  const svgEl = (tag, attrs = {}, text) => {
-    const n = document.createElementNS(SVGNS, tag);
-    for (const [k, v] of Object.entries(attrs)) n.setAttribute(k, v);
-    if (text !== undefined) n.textContent = text;
-    return n;
-  };
-  function ticks(lo, hi, n = 5) {
-    const span = hi - lo || 1, raw = span / n, p = Math.pow(10, Math.floor(Math.log10(raw)));
-    const step = [1, 2, 2.5, 5, 10].map((k) => k * p).find((s) => span / s <= n) || 10 * p;
-    const out = [];
-    for (let v = Math.ceil(lo / step) * step; v <= hi + step * 1e-9; v += step) out.push(+v.toPrecision(12));
-    return { values: out, step };
-  }
-  /** Tick labels with as many decimals as the step needs (0.0025 -> 4, 0.5 -> 1, 20 -> 0). */
-  function tickText(v, step) {
-    const s = String(+step.toPrecision(6)), i = s.indexOf(".");
-    return v.toFixed(s.includes("e") ? 6 : i < 0 ? 0 : s.length - i - 1);
-  }
-  function extent(values, pad = 0.04) {
-    let lo = Math.min(...values), hi = Math.max(...values);
-    if (!isFinite(lo)) { lo = 0; hi = 1; }
-    if (hi - lo < 1e-9) { lo -= 0.5; hi += 0.5; }
-    const d = (hi - lo) * pad;
-    return [lo - d, hi + d];
-  }
-
-  /** A line chart: series = [{pts: [[x, y]], color, label, dash}]; `equal` keeps metres square (top views). */
-  const widthOf = (box) => Math.max(320, Math.round(box.clientWidth || 460));
-  function lineChart(box, series, { xLabel, yLabel, equal = false, yZero = false } = {}) {
-    const W = widthOf(box), H = Math.round(W * 0.66);
-    const M = { l: 58, r: 14, t: 10, b: 42 };
-    const xs = series.flatMap((s) => s.pts.map((p) => p[0])), ys = series.flatMap((s) => s.pts.map((p) => p[1]));
-    let [x0, x1] = extent(xs), [y0, y1] = extent(ys);
-    if (yZero) y0 = Math.min(0, y0);
-    const pw = W - M.l - M.r, ph = H - M.t - M.b;
-    if (equal) { // same metres per pixel on both axes
-      const s = Math.max((x1 - x0) / pw, (y1 - y0) / ph);
-      const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
-      [x0, x1, y0, y1] = [cx - s * pw / 2, cx + s * pw / 2, cy - s * ph / 2, cy + s * ph / 2];
-    }
-    const X = (x) => M.l + (x - x0) / (x1 - x0) * pw, Y = (y) => M.t + ph - (y - y0) / (y1 - y0) * ph;
-    const svg = svgEl("svg", { viewBox: `0 0 ${W} ${H}`, role: "img", "aria-label": `${yLabel} against ${xLabel}` });
-    const grid = svgEl("g", { class: "grid" }), axis = svgEl("g", { class: "axis" });
-    const tx = ticks(x0, x1, 6), ty = ticks(y0, y1, 5);
-    for (const v of tx.values) {
-      grid.append(svgEl("line", { x1: X(v), x2: X(v), y1: M.t, y2: M.t + ph }));
-      axis.append(svgEl("text", { x: X(v), y: M.t + ph + 14, "text-anchor": "middle" }, tickText(v, tx.step)));
-    }
-    for (const v of ty.values) {
-      grid.append(svgEl("line", { x1: M.l, x2: M.l + pw, y1: Y(v), y2: Y(v) }));
-      axis.append(svgEl("text", { x: M.l - 6, y: Y(v) + 4, "text-anchor": "end" }, tickText(v, ty.step)));
-    }
-    axis.append(svgEl("path", { d: `M${M.l},${M.t}V${M.t + ph}H${M.l + pw}`, fill: "none" }));
-    axis.append(svgEl("text", { x: M.l + pw / 2, y: H - 6, "text-anchor": "middle" }, xLabel));
-    axis.append(svgEl("text", { x: 12, y: M.t + ph / 2, "text-anchor": "middle", transform: `rotate(-90 12 ${M.t + ph / 2})` }, yLabel));
-    svg.append(grid, axis);
-    for (const s of series) {
-      if (!s.pts.length) continue;
-      const d = s.pts.map((p, i) => (i ? "L" : "M") + X(p[0]).toFixed(1) + "," + Y(p[1]).toFixed(1)).join("");
-      svg.append(svgEl("path", { d, fill: "none", stroke: s.color, "stroke-width": s.width || 1.8,
-        "stroke-dasharray": s.dash || "none", "stroke-linejoin": "round", class: "series", "data-label": s.label }));
-      if (s.start) svg.append(svgEl("circle", { cx: X(s.pts[0][0]), cy: Y(s.pts[0][1]), r: 3.5, fill: s.color }));
-    }
-    box.replaceChildren(svg, legend(series));
-  }
-  const legend = (series) => el("div", { class: "legend" }, ...series.filter((s) => s.label).map((s) => {
-    const i = el("i"); i.style.background = s.color; if (s.dash) i.style.opacity = ".7";
-    return el("span", {}, i, s.label);
-  }));
-
-  /** Horizontal bars: items = [[label, value]]; unit appended to the value labels. */
-  function barChart(box, items, unit) {
-    const W = widthOf(box);
-    const rowH = 26, M = { l: 110, r: 70, t: 6, b: 38 }, H = M.t + M.b + rowH * items.length;
-    const max = Math.max(...items.map((i) => i[1]), 1e-9), pw = W - M.l - M.r;
-    const step = ticks(0, max, 4).step, top = Math.ceil(max / step - 1e-9) * step;
-    const tx = ticks(0, top, 4);
-    const X = (v) => M.l + v / top * pw;
-    const svg = svgEl("svg", { viewBox: `0 0 ${W} ${H}`, role: "img", "aria-label": "time per stage" });
-    const grid = svgEl("g", { class: "grid" }), axis = svgEl("g", { class: "axis" });
-    for (const v of tx.values) {
-      grid.append(svgEl("line", { x1: X(v), x2: X(v), y1: M.t, y2: H - M.b }));
-      axis.append(svgEl("text", { x: X(v), y: H - M.b + 14, "text-anchor": "middle" }, tickText(v, tx.step)));
-    }
-    axis.append(svgEl("text", { x: M.l + pw / 2, y: H - 2, "text-anchor": "middle" }, unit));
-    svg.append(grid, axis);
-    items.forEach(([label, v], k) => {
-      const y = M.t + k * rowH;
-      svg.append(svgEl("text", { x: M.l - 8, y: y + rowH / 2 + 4, "text-anchor": "end" }, label.replace(/_/g, " ")));
-      svg.append(svgEl("rect", { x: M.l, y: y + 4, width: Math.max(1, X(v) - M.l), height: rowH - 8, fill: COLORS.bar, rx: 2, class: "bar" }));
-      svg.append(svgEl("text", { x: X(v) + 5, y: y + rowH / 2 + 4 }, num(v, v < 10 ? 2 : 1) + " ms"));
-    });
-    box.replaceChildren(svg);
-  }
-  const note = (box, text) => box.replaceChildren(el("p", { class: "muted" }, text));
-
   /** Top view: the SLAM world is the first camera's frame (y down), so the ground plane is x-z. */
   function topView(est, gt) {
     const [a, b] = [1, 3];
@@ -215,11 +131,7 @@
   }
 
   // ---------- results ----------
-  async function fetchText(name) {
-    const res = await fetch(`${VTD.API}/jobs/${jobId}/artifacts/${encodeURIComponent(name)}`);
-    if (!res.ok) throw VTD.errorFrom(res.status, await res.text());
-    return res.text();
-  }
+  const fetchText = (name) => VTDPlot.artifactText(jobId, name);
   const DESCRIBE = {
     "trajectory.txt": "estimated camera poses T_WC, TUM format", "keyframes.txt": "keyframe poses, TUM format",
     "map.ply": "dense point cloud of the static scene", "metrics.json": "ATE, RPE, speed, timings",
@@ -240,9 +152,12 @@
     }
     const m = job.metrics || {};
     metricsTable(m);
+    truthTable(m);
     const timings = Object.entries(m.timings_ms || {}).filter(([, v]) => isNum(v));
-    if (timings.length) barChart($("plot-timing"), timings, "mean time per call (ms)");
-    else note($("plot-timing"), "This run recorded no stage timings.");
+    if (timings.length) {
+      barChart($("plot-timing"), timings.map(([k, v]) => ({ label: k.replace(/_/g, " "), value: v })),
+        { unit: "mean time per call (ms)", fmt: (v) => num(v, v < 10 ? 2 : 1) + " ms", ariaLabel: "time per stage" });
+    } else note($("plot-timing"), "This run recorded no stage timings.");
     previews(artifacts.filter((a) => /\.(png|jpe?g)$/i.test(a.name) && a.name !== "preview.png")); // that one is a trajectory sketch
 
     const fname = names.has("frame_stats.csv") ? "frame_stats.csv" : names.has("frames.csv") ? "frames.csv" : null;

@@ -24,16 +24,16 @@
   function row(job) {
     const ate = job.metrics && job.metrics.ate ? job.metrics.ate.rmse : null;
     const err = job.status === "failed" && job.error ? el("div", { class: "small st-failed" }, job.error) : null;
+    const act = actions(job); // in the first cell: on screen however far a narrow table scrolls
     return el("tr", { id: "job-" + job.id },
-      el("td", {}, el("a", { href: "/jobs/" + job.id }, shortId(job.id))),
+      el("td", {}, el("a", { href: "/jobs/" + job.id }, shortId(job.id)), act ? el("div", { class: "row-actions" }, act) : null),
       el("td", {}, names.get(job.sequence_id) || job.sequence_id.slice(0, 8)),
       el("td", { class: "nw" }, job.preset),
       el("td", {}, statusBadge(job.status), err),
       el("td", {}, progressCell(job)),
       el("td", { class: "n" }, seconds(jobDuration(job))),
       el("td", { class: "n", title: "absolute trajectory error, root mean square" }, metres(ate)),
-      el("td", { class: "small nw" }, when(job.created_at)),
-      el("td", {}, actions(job)));
+      el("td", { class: "small nw" }, when(job.created_at)));
   }
 
   function update(job) {
@@ -53,7 +53,7 @@
       const page = await api("/jobs?limit=100" + (status ? "&status=" + status : ""));
       if (page.items.some((j) => !names.has(j.sequence_id))) await sequenceNames();
       $("jobs-body").replaceChildren(...(page.items.length ? page.items.map(row)
-        : [el("tr", {}, el("td", { colspan: 9, class: "muted" }, "No jobs yet: start one from a sequence."))]));
+        : [el("tr", {}, el("td", { colspan: 8, class: "muted" }, "No jobs yet: start one from a sequence."))]));
       showError($("jobs-error"), null);
       const active = page.items.filter((j) => !TERMINAL.has(j.status));
       for (const [id, stop] of streams) if (!active.some((j) => j.id === id)) { stop(); streams.delete(id); }
