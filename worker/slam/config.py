@@ -49,8 +49,8 @@ class TrackingConfig:
     """Fewer inliers than this after pose optimisation means tracking is lost."""
     virtual_baseline_m: float = 0.01
     """Virtual stereo baseline that turns depth into a third (right-image) reprojection residual; it sets
-    how much keypoint depth weighs in pose optimisation. ORB-SLAM2 uses ~0.08 on TUM; on 7-Scenes
-    redkitchen (colour/depth not exactly registered) 0.01 measured best (ATE 3.9 cm vs 4.4 cm at 0.08)."""
+    how much keypoint depth weighs in pose optimisation. ORB-SLAM2 uses ~0.08 on TUM; 7-Scenes' colour and depth
+    are not exactly registered, so its depth deserves less weight (README, "Settings chosen by measurement")."""
     huber_px: float = 2.45
     """Huber threshold (pixels) of the robust kernel, sqrt of the 2-dof 95% chi-square (5.99)."""
     ba_rounds: int = 4

@@ -45,7 +45,7 @@ class CullingConfig:
     ransac_px: float = 1.0
     """RANSAC inlier threshold of the fundamental matrix (pixels)."""
     fit_max_points: int = 200
-    """The depth test's pose is fitted on at most this many static matches (evenly picked): with ~80 %
+    """The depth test's pose is fitted on at most this many static matches (evenly picked): with mostly
     inliers more points make RANSAC slower, not the pose better; every match is then scored. (F keeps all
     static matches: on a nearly planar static scene a subset left it ill-determined in the tests.)"""
     match_max_distance: int = 50
@@ -62,20 +62,13 @@ class CullingConfig:
     """An object keypoint's brute-force match gives way to its guided match (a previous keypoint near where the
     prediction puts it if static) when that one's Hamming distance is at most this much larger (-1 = never):
     exhaustive matching picks the best descriptor anywhere near the objects, on repeated texture (kitchen
-    cabinets) sometimes a wrong match far away. `no-restoration`, MSNET: augmented seeds 0-4 mean ATE 0.0338 ->
-    0.0303 m, seeds 0-7 0.0381 -> 0.0365, all 1000 frames of seed 0 0.0470 -> 0.0432 m (seeds 0-4 with 5 / 10 /
-    256 bits: 0.0335 / 0.0309 / 0.0303); feature precision/recall, true masks and static 7-Scenes unchanged,
-    synthetic room 0.0100 -> 0.0101. A modest gain on the means: it changes 1.4 % of the objects' matches, on
-    true movers as often as on static pixels. Matching every object keypoint by the guided search first lost
-    tracking on seed 7."""
+    cabinets) sometimes a wrong match far away. A modest gain on the means that touches few matches; guided
+    matching of every object keypoint first instead lost tracking (README, "Ambiguous matches on objects")."""
     confirm_on_objects: bool = True
     """When too few keypoints outside the segments match the prediction, count the guided matches of all
-    keypoints instead. Segmentation that marks most of the view (MSNET on the synthetic room: 70-80 % in
-    frames 70-92) otherwise leaves the prediction unconfirmed, so the prediction veto is off exactly when F,
-    fitted on the few points left outside, is least reliable. `no-restoration`, MSNET, with `refine_prediction_below`:
-    guided frames on five augmented seeds 1438 -> 1483 of 1495, ATE 0.0344 / 0.0313 / 0.0460 / 0.0431 / 0.0263 ->
-    0.0423 / 0.0313 / 0.0387 / 0.0278 / 0.0263 m (mean 0.036 -> 0.033), synthetic room 0.0140 -> 0.0100, but
-    all 1000 frames of seed 0 0.039 -> 0.047 (0.046 with this alone); true masks and static scenes unchanged."""
+    keypoints instead. Segmentation that marks most of the view (MSNET on the synthetic room) otherwise leaves
+    the prediction unconfirmed, so the prediction veto is off exactly when F, fitted on the few points left
+    outside, is least reliable (README, "The prediction under masks that cover the view")."""
     use_depth: bool = True
     """Add the reprojection test with the previous frame's depth."""
     pnp_px: float = 2.0
@@ -90,22 +83,17 @@ class CullingConfig:
     reprojection error under that prediction: it must move against the tracker's expectation too. F and the
     depth test's pose are fitted on the matches outside the segments, and when segmentation marks most of the
     static view and misses part of a person (MSNET: floor, chairs, red cabinets), that outside set is mostly
-    the person; the whole static scene then looks moving and tracking is lost. `no-restoration` with MSNET,
-    augmented seeds 0-7, 300 frames, ATE without -> with (m): 0.045 -> 0.034, 0.036 -> 0.031, 0.050 -> 0.046,
-    0.247 (97 frames tracked) -> 0.043 (291), 0.025 -> 0.026, 0.037 -> 0.048, 0.036 -> 0.034, 0.228 (151) ->
-    0.064 (284); all 1000 frames of seed 0: 0.046 -> 0.039; 90 frames (the real-data test): 0.0085 -> 0.067
-    (one window where a missed person carries a third of the kept features); static 7-Scenes and the
-    synthetic room unchanged."""
+    the person; the whole static scene then looks moving and tracking is lost. Where segmentation is right the
+    veto can only keep slow movers, so it trades a little there for not losing whole sequences (README,
+    "Prediction veto")."""
     refine_prediction_below: float = 0.2
     """When fewer than this fraction of the matches lie outside the segments, the prediction veto uses the
     predicted pose refined on all matched points (`_refine_from`: LM from the prediction on the points it
     explains, gates of 3 and 1 x `pnp_px`; a wide first gate let a mover pull the pose along) instead of the raw
     constant-velocity prediction (0 = never). There F and the depth pose, fitted on the few matches outside,
-    are weak and the veto decides: MSNET marks 70-80 % of the synthetic room in frames 70-92, and a prediction
-    4 px off made the whole static view look moving (median score 4.0 against a threshold of 2.7); refined,
-    `no-restoration` tracks all 200 frames (193 before) and ATE goes 0.0139 -> 0.0100 m. Refining in more frames
-    (below 0.5, or always) lowered the augmented seeds' mean (0.033 -> 0.031 m) but hurt the true-mask oracle on
-    seed 0 (0.025 -> 0.048 m): an exact pose lets the veto keep slow movers."""
+    are weak and the veto decides, and a prediction a few pixels off makes the whole static view look moving.
+    Not always: an exact pose lets the veto keep slow movers (README, "The prediction under masks that cover
+    the view")."""
     min_points: int = 3
     """A segment needs this many matched points to be judged by geometry."""
     undecided_dynamic: bool = True
@@ -123,12 +111,9 @@ class CullingConfig:
     """Pixels within this (relative) depth of a cluster's median depth belong to the moving region."""
     grow_px: int = 0
     """A dynamic segment is extended by up to this many pixels along its own surface (depth), to cover what
-    segmentation missed (0 = off); see `segments.grow_by_depth`. Off: with MSNET (no-restoration, 300 frames of
-    five augmented seeds) 32 px lifted dynamic-feature recall from ~0.80 to ~0.90 and lowered ATE on 3 of the 4
-    seeds that tracked (0.045/0.036/0.050/0.025 -> 0.051/0.029/0.038/0.022 m), but on all 1000 frames of seed 0
-    it lost tracking (546 and 778 frames tracked in two runs, ATE 0.67 and 0.43 m, against 998 and 0.046 m
-    without): from frame 446, MSNET marks 66 % of the view and growth spreads the dynamic area along the floor
-    to 79 %."""
+    segmentation missed (0 = off); see `segments.grow_by_depth`. Off: it lifts recall with MSNET, but where
+    MSNET marks most of the view it spreads the false positives along the floor and tracking is lost (README,
+    "Tried and not on")."""
     grow_rel_depth: float = 0.15
     """Relative depth tolerance of that growth around the segment's median depth."""
     local_px: float = 48.0
@@ -143,14 +128,12 @@ class CullingConfig:
     """Local decisions are made on a grid of this spacing and spread to its cells."""
     dilation_px: int = 3
     """The exclude mask is the dynamic mask dilated by this many pixels (a keypoint on the silhouette describes a
-    patch that moves with the object). With true masks a band of half the ORB patch is best (augmented sequence,
-    300 frames: ATE 0.049 / 0.033 / 0.025 / 0.023 m for 1 / 3 / 8 / 16 px; people-free 0.023), but MSNET's masks
-    already spill past people, and a wider band starves tracking: with them, 3 / 8 / 15 px gave ATE
-    0.045 / 0.044 / 0.050 m on 300 frames, 0.046 / 0.050 / 0.153 m on all 1000 (15 px: 111 frames lost), and
-    +3 / +0.4 / +6 % over `orb-only` on static 7-Scenes. Use 15 with a precise segmenter."""
+    patch that moves with the object). With true masks a band of half the ORB patch is best, but MSNET's masks
+    already spill past people and a wider band starves tracking, hence the narrow default. Use 15 with a precise
+    segmenter (README, the exclusion-band table)."""
     cluster_dilation_px: int = 3
     """The same for the geometric clusters, whose regions are already whole grid cells wide (a wider band
-    there removed static features: geometry-only ATE +14 % on static 7-Scenes)."""
+    there removed static features and cost `geometry-only` accuracy on static 7-Scenes)."""
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ class SegmentationStageConfig:
     """Which network marks potentially dynamic pixels."""
 
     segmenter: SegmenterConfig = field(default_factory=lambda: SegmenterConfig(threads=1))
-    """One inference thread by default: on a shared 2-core CPU two torch threads ran ~10x slower."""
+    """One inference thread by default: on a small shared CPU more torch threads contend and run far slower."""
     source: str = "network"
     """`network` (the segmenter above) or `truth`: the sequence's true dynamic masks (`truth/masks`, from the
     synthetic and augmented generators), an oracle that separates culling's errors from segmentation's."""
@@ -47,14 +47,13 @@ class CullingStageConfig:
     culling: CullingConfig = field(default_factory=CullingConfig)
     lag_frames: int = 10
     """Compare with the frame this many frames back (the previous one at the start). Slow movers are the hard
-    case: on the augmented-real sequence people move a median 1.3 px between consecutive frames (static points:
-    0.6 px), 6.3 px over 10 frames (static: 1.0 px), so a longer baseline separates them."""
+    case: between consecutive frames a walking person's points move barely more than static points' noise, so
+    a longer baseline separates them."""
     min_kept_features: int = 0
     """When culling would leave the tracker fewer features than this, keypoints in the exclusion band (near,
     not on, dynamic objects) are given back in the extractor's order (counted as `features_readmitted`). It
-    rescues a wide band (`dilation_px` 15 with MSNET, augmented sequence, 1000 frames: ATE 0.153 -> 0.061 m,
-    889 -> 993 frames tracked); with the 3 px default 150 was mixed (no-restoration 300 frames 0.045 -> 0.040 m,
-    1000 frames 0.046 -> 0.048 m) and hurt `geometry-only` (0.150 -> 0.183 m), so it is off. 0 = off."""
+    rescues a wide band (`dilation_px` 15); with the narrow default band it was mixed and hurt `geometry-only`,
+    so it is off. 0 = off."""
 
 
 @dataclass

@@ -7,8 +7,7 @@ distances use known target pixels at full weight and the current estimate of hol
 (Wexler-style completion); invalid source pixels are skipped.
 
 The scan is inherently sequential (a match found early spreads along the scan), so it is compiled with numba:
-measured about 20x faster than a vectorised numpy version with jump-flood propagation (0.12 s vs 2.8 s
-for a 15 % hole at 640x480, random initialisation).
+a vectorised numpy version (jump-flood propagation) was an order of magnitude slower.
 """
 from __future__ import annotations
 

@@ -25,7 +25,7 @@ class ReferenceSelectionConfig:
     max_refs: int = 4
     candidate_stride: int = 2
     """Only every n-th frame of the window is a candidate: neighbours see nearly the same background, and the
-    information test (a brute-force match per candidate) dominated the stage's time (~60 % at stride 1)."""
+    information test (a brute-force match per candidate) dominated the stage's time at stride 1."""
     max_target_descriptors: int = 256
     """The information test matches at most this many of the target's descriptors (evenly picked): the
     matched fraction is an estimate, and the cost grows with target × candidate descriptors."""

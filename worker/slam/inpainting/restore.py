@@ -27,10 +27,9 @@ class RestorationConfig:
     unseen_fill: str = "telea"
     """How pixels no reference sees are filled: "telea" (OpenCV's smooth diffusion from the hole's border: it
     invents no texture, hence no false ORB corners) or "patchmatch" (the paper: texture copied from the
-    references' and the frame's own static regions). Measured with bench/bench_inpainting.py against the true
-    background (online, 15 frames each): telea 23.3 dB / 62 ms on synthetic and 17.3 dB / 74 ms on
-    augmented-real, patchmatch 19.5 dB / 261 ms and 11.2 dB / 327 ms (copied look-alike texture scores worse
-    than a smooth guess and costs a full-image search). Geometry-seen pixels are the same either way."""
+    references' and the frame's own static regions). Telea by default: against the true background copied
+    look-alike texture scores worse than a smooth guess and costs a full-image search (README, "Background
+    restoration"). Geometry-seen pixels are the same either way."""
 
     def __post_init__(self) -> None:
         if self.unseen_fill not in ("patchmatch", "telea"):
@@ -42,11 +41,12 @@ class RestorationConfig:
     nearest reference pixel the splat found."""
     searched_depth: bool = False
     """Give depth to pixels PatchMatch found by appearance alone (no geometric support). Off: on synthetic truth
-    their depth is off by ~10 cm median (look-alike textures elsewhere), so they stay invalid."""
+    their depth is typically wrong by centimetres to decimetres (look-alike textures elsewhere), so they stay
+    invalid."""
     geometry_first: bool = True
     """Hole pixels a reference sees through geometry take that pixel directly and become context; PatchMatch
-    searches only the rest. Measured on synthetic truth: free PatchMatch over geometry-initialised pixels drifts
-    to look-alike patches (34 dB → 25 dB on covered pixels), so geometry is trusted where it exists."""
+    searches only the rest: on synthetic truth free PatchMatch over geometry-initialised pixels drifted to
+    look-alike patches, so geometry is trusted where it exists."""
 
 
 @dataclass(frozen=True)

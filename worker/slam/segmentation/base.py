@@ -82,9 +82,8 @@ class SegmenterConfig:
     guided_radius: int = 0
     """msnet: upsample the network's probabilities with a fast guided filter (grey image as guide) of this
     radius, in pixels of its output grid (13 ≈ 32 px at 640x480); 0 = plain bilinear upsampling. Off: the
-    masks' borders follow image edges (person IoU, pooled over 150 augmented 7-Scenes frames, 0.417 -> 0.429;
-    walking_xyz 0.697 -> 0.705), but SLAM gets worse: `no-restoration` on five augmented seeds, 300 frames,
-    mean ATE 0.036 -> 0.071 m (0.057 with an 8 px exclusion band). See weights/MODEL_CARD.md."""
+    masks' borders follow image edges and segmentation scores improve a little, but SLAM gets worse (see
+    weights/MODEL_CARD.md, "Guided upsampling")."""
     guided_eps: float = 0.01
     """msnet: the guided filter's edge sensitivity (variance of grey levels in [0, 1]); larger = smoother."""
 
