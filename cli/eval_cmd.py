@@ -24,6 +24,10 @@ def eval_command(
              "--max_pairs 0) or 'fixed-delta' (its --fixed_delta: each pose with the one --rpe-delta seconds "
              "later, the drift per interval that a run's metrics.json reports).")] = "all-pairs",
     rpe_delta: Annotated[float, typer.Option(help="RPE interval in seconds (fixed-delta mode).")] = 1.0,
+    rpe_max_pairs: Annotated[int, typer.Option(
+        help="Evaluate at most this many pose pairs, sampled with a fixed seed (the script's --max_pairs; its "
+             "default 10000 makes its all-pairs figures random); 0 = every pair. All pairs of N poses hold N^2 "
+             "errors: bound it for trajectories of many thousand poses.")] = 0,
 ) -> None:
     """ATE (SE(3)-aligned, no scale, as TUM evaluate_ate, via evo) and RPE as TUM evaluate_rpe."""
     from worker.slam.evaluation.metrics import RpeMode, evaluate
@@ -33,8 +37,10 @@ def eval_command(
         raise typer.BadParameter(f"must be one of {', '.join(_RPE_MODES)}", param_hint="--rpe-mode")
     if rpe_delta <= 0:
         raise typer.BadParameter("must be positive", param_hint="--rpe-delta")
+    if rpe_max_pairs < 0:
+        raise typer.BadParameter("must be 0 (every pair) or positive", param_hint="--rpe-max-pairs")
     result = evaluate(read_tum_trajectory(groundtruth), read_tum_trajectory(estimate), max_diff, rpe_delta,
-                      RpeMode(rpe_mode))
+                      RpeMode(rpe_mode), rpe_max_pairs)
     if as_json:
         typer.echo(json.dumps(result.to_dict(), indent=2))
         return
@@ -47,6 +53,7 @@ def eval_command(
         return
     t, r = result.rpe.trans, result.rpe.rot_deg
     per = f"/{rpe_delta:g}s" if result.rpe.delta_s is not None else ", all pairs"
-    typer.echo(f"RPE pairs            {result.rpe.pairs} ({result.rpe.mode.value})")
+    sampled = f", at most {rpe_max_pairs} sampled" if rpe_max_pairs else ""
+    typer.echo(f"RPE pairs            {result.rpe.pairs} ({result.rpe.mode.value}{sampled})")
     typer.echo(f"RPE trans (m{per})   rmse {t.rmse:.4f}  mean {t.mean:.4f}  median {t.median:.4f}  max {t.max:.4f}")
     typer.echo(f"RPE rot (deg{per})   rmse {r.rmse:.3f}  mean {r.mean:.3f}  median {r.median:.3f}  max {r.max:.3f}")

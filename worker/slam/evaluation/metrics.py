@@ -34,7 +34,7 @@ class EvalResult:
 
     def to_dict(self) -> dict:
         """The metrics.json shape: `ate` {rmse, mean, median, std, max}, `matched_poses`, `rpe` {trans,
-        rot_deg, mode, delta_s, pairs} (absent when there is no RPE)."""
+        rot_deg, mode, delta_s, max_pairs, pairs} (absent when there is no RPE)."""
         out: dict = {"ate": asdict(self.ate), "matched_poses": self.matched}
         if self.rpe is not None:
             out["rpe"] = self.rpe.to_dict()
@@ -51,8 +51,9 @@ def _stats(metric: metrics.PE) -> ErrorStats:
 
 
 def evaluate(groundtruth: Trajectory, estimate: Trajectory, max_diff: float = 0.02, rpe_delta_s: float = 1.0,
-             rpe_mode: RpeMode = RpeMode.FIXED_DELTA) -> EvalResult:
-    """Compare an estimate with ground truth (`rpe_delta_s` is used in fixed-delta mode only).
+             rpe_mode: RpeMode = RpeMode.FIXED_DELTA, rpe_max_pairs: int = 0) -> EvalResult:
+    """Compare an estimate with ground truth. RPE: see `rpe.relative_pose_error` (`rpe_delta_s` is used in
+    fixed-delta mode only; `rpe_max_pairs` 0 = every pair).
 
     Raises EvaluationError when fewer than 3 poses associate or when the associated positions make the rigid
     alignment undefined (e.g. an estimate that never moved).
@@ -73,7 +74,7 @@ def evaluate(groundtruth: Trajectory, estimate: Trajectory, max_diff: float = 0.
     gt_in_est = np.linalg.inv(T_ref_est) @ np.asarray(ref.poses_se3)
     ape = metrics.APE(metrics.PoseRelation.translation_part)
     ape.process_data((ref, est))
-    rpe = relative_pose_error(groundtruth, estimate, rpe_mode, rpe_delta_s)
+    rpe = relative_pose_error(groundtruth, estimate, rpe_mode, rpe_delta_s, rpe_max_pairs)
     return EvalResult(_stats(ape), rpe, ref.num_poses, np.asarray(ape.error), np.asarray(est.timestamps),
                       Trajectory(np.asarray(est.timestamps), gt_in_est))
 

@@ -9,8 +9,11 @@ The script, for an estimate P and ground truth Q (camera-to-world poses):
   ordered pairs (i, j), i == j included;
 - E = (P_i^-1 P_j) (Q_i^-1 Q_j)^-1; the translation error is |t(E)| in metres, the rotation error the angle of
   R(E) (arccos((tr R - 1) / 2)), reported here in degrees.
-Differences, by choice: no random sub-sampling (the script keeps 10000 random pairs when it has more, which
-makes all-pairs results depend on the random generator; this is the script run with `--max_pairs 0`).
+Pair sub-sampling: the script keeps `--max_pairs` (default 10000) random pairs when it has more, which makes
+its all-pairs figures depend on Python's generator. Here `max_pairs` defaults to 0, every pair (the script
+with `--max_pairs 0`, exact and reproducible); a positive value samples the same way (uniform pairs with
+replacement in all-pairs mode, a subset in fixed-delta mode) with a fixed-seed numpy generator, which bounds
+the memory for long trajectories (all pairs of N poses hold N^2 errors).
 
 Why not evo's `metrics.RPE`: it pairs by frames, metres or angles but not by time; its `all_pairs` means
 every start index at one fixed delta, not every pair; and its error inv(Q_rel) P_rel has the same angle but
@@ -42,20 +45,25 @@ class RpeResult:
 
     mode: RpeMode
     delta_s: float | None  # the fixed interval; None in all-pairs mode
-    pairs: int
+    max_pairs: int  # the sampling bound asked for; 0 = every pair
+    pairs: int  # pairs evaluated (those with ground truth at both ends)
     trans: ErrorStats
     rot_deg: ErrorStats
 
     def to_dict(self) -> dict:
-        return {"mode": self.mode.value, "delta_s": self.delta_s, "pairs": self.pairs,
-                "trans": asdict(self.trans), "rot_deg": asdict(self.rot_deg)}
+        return {"mode": self.mode.value, "delta_s": self.delta_s, "max_pairs": self.max_pairs,
+                "pairs": self.pairs, "trans": asdict(self.trans), "rot_deg": asdict(self.rot_deg)}
 
 
 def relative_pose_error(groundtruth: Trajectory, estimate: Trajectory, mode: RpeMode = RpeMode.FIXED_DELTA,
-                        delta_s: float = 1.0) -> RpeResult | None:
-    """TUM's RPE of `estimate` against `groundtruth`; None when fewer than 2 pairs remain (the script fails)."""
+                        delta_s: float = 1.0, max_pairs: int = 0) -> RpeResult | None:
+    """TUM's RPE of `estimate` against `groundtruth`; None when fewer than 2 pairs remain (the script fails).
+    `max_pairs` > 0 samples that many pairs when there are more (0: every pair)."""
     if mode is RpeMode.FIXED_DELTA and delta_s <= 0:
         raise ValueError(f"delta_s must be positive, got {delta_s}")
+    if max_pairs < 0:
+        raise ValueError(f"max_pairs must be >= 0, got {max_pairs}")
+    rng = np.random.default_rng(0)
     t_gt, q = _by_timestamp(groundtruth)
     t_est, p = _by_timestamp(estimate)
     if len(t_gt) < 2 or len(t_est) < 2:
@@ -64,17 +72,26 @@ def relative_pose_error(groundtruth: Trajectory, estimate: Trajectory, mode: Rpe
     max_gap = 2.0 * float(np.median(np.diff(t_gt)))
     has_gt = np.abs(t_gt[gt_idx] - t_est) <= max_gap
     q = q[gt_idx]  # (N_est, 4, 4) the ground truth at each estimate pose (valid where has_gt)
+    n = len(t_est)
+    chunks: Iterator[tuple[np.ndarray, np.ndarray]]
     if mode is RpeMode.FIXED_DELTA:
-        i = np.arange(len(t_est))
         j = _closest(t_est, t_est + delta_s)
-        keep = (j != len(t_est) - 1) & has_gt[i] & has_gt[j]
-        chunks: Iterator[tuple[np.ndarray, np.ndarray]] = iter([(i[keep], j[keep])])
+        i = np.nonzero(j != n - 1)[0]
+        if 0 < max_pairs < len(i):  # sampled before the ground-truth check, as the script does
+            i = np.sort(rng.choice(i, max_pairs, replace=False))
+        j = j[i]
+        keep = has_gt[i] & has_gt[j]
+        chunks = iter([(i[keep], j[keep])])
+    elif 0 < max_pairs < n * n:
+        i, j = rng.integers(0, n, (2, max_pairs))
+        keep = has_gt[i] & has_gt[j]
+        chunks = iter([(i[keep], j[keep])])
     else:
         chunks = _all_pairs(np.nonzero(has_gt)[0])
     trans, rot = _errors(p, q, chunks)
     if len(trans) < 2:
         return None
-    return RpeResult(mode, delta_s if mode is RpeMode.FIXED_DELTA else None, len(trans),
+    return RpeResult(mode, delta_s if mode is RpeMode.FIXED_DELTA else None, max_pairs, len(trans),
                      error_stats(trans), error_stats(rot))
 
 

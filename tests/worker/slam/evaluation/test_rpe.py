@@ -4,6 +4,7 @@ Expected values come from `tum_rpe_reference.py`, a step-by-step re-implementati
 binary-search lookup and 4x4 `ominus`, no pair sub-sampling), independent of the module under test; the
 module must agree to 1e-6 relative in both modes, with the same number of pairs.
 """
+import dataclasses
 import json
 
 import numpy as np
@@ -68,6 +69,8 @@ def test_golden_rpe_through_cli(shared):
     assert fixed["rpe"]["mode"] == "fixed-delta" and fixed["rpe"]["delta_s"] == 1.0
     assert default["rpe"]["pairs"] > fixed["rpe"]["pairs"] > 0
     assert set(fixed["rpe"]["trans"]) == {"rmse", "mean", "median", "std", "max"}
+    sampled = json.loads(CliRunner().invoke(app, [*args, "--rpe-max-pairs", "5000"]).stdout)
+    assert sampled["rpe"]["max_pairs"] == 5000 and 0 < sampled["rpe"]["pairs"] <= 5000
 
 
 def test_cli_rejects_unknown_rpe_mode(tmp_path):
@@ -127,3 +130,27 @@ def test_too_short_for_a_pair_gives_none():
     t = np.arange(5) / 30.0  # 0.13 s: every pose's 1 s partner is the last pose
     traj = Trajectory(t, _poses(5, 8))
     assert relative_pose_error(traj, traj, RpeMode.FIXED_DELTA, 1.0) is None
+
+
+def test_max_pairs_samples_reproducibly_and_close_to_every_pair(shared):
+    """Sampling (the script's --max_pairs) evaluates at most that many pairs, the same ones each call, and
+    its statistics estimate the exhaustive ones."""
+    d = shared / "data" / "trajectories" / "tum_fr3_walking_xyz"
+    gt, est = read_tum_trajectory(d / "groundtruth.txt"), read_tum_trajectory(d / "dynaslam_estimate.txt")
+    full = relative_pose_error(gt, est, RpeMode.ALL_PAIRS)
+    a = relative_pose_error(gt, est, RpeMode.ALL_PAIRS, max_pairs=20_000)
+    b = relative_pose_error(gt, est, RpeMode.ALL_PAIRS, max_pairs=20_000)
+    assert full is not None and a is not None and a == b
+    assert 19_000 < a.pairs <= 20_000 and a.max_pairs == 20_000 and full.max_pairs == 0
+    assert a.trans.rmse == pytest.approx(full.trans.rmse, rel=0.03)
+    fixed = relative_pose_error(gt, est, RpeMode.FIXED_DELTA, 1.0, max_pairs=100)
+    assert fixed is not None and fixed.pairs == 100
+
+
+def test_max_pairs_above_the_pair_count_changes_nothing():
+    t = np.arange(60) / 30.0
+    gt, est = Trajectory(t, _poses(60, 9)), Trajectory(t, _poses(60, 10))
+    for mode in RpeMode:
+        every = relative_pose_error(gt, est, mode)
+        assert every is not None
+        assert relative_pose_error(gt, est, mode, max_pairs=10**6) == dataclasses.replace(every, max_pairs=10**6)
