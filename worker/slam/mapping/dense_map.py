@@ -1,0 +1,23 @@
+"""The dense map `map.ply` is built from: the keyframes fused by the configured method."""
+from __future__ import annotations
+
+import numpy as np
+
+from worker.slam.config import DenseConfig
+from worker.slam.errors import ConfigError
+from worker.slam.map.keyframe import KeyFrame
+from worker.slam.mapping.dense import fuse_keyframes
+from worker.slam.mapping.tsdf import fuse_tsdf
+
+
+def build_dense_map(keyframes: list[KeyFrame], K: np.ndarray, dist: np.ndarray | None,
+                    cfg: DenseConfig) -> tuple[np.ndarray, np.ndarray]:
+    """World points (M,3) float32 and colours (M,3) uint8 RGB of the keyframes at their current `T_WC`.
+
+    `K` 3x3 intrinsics of the full image, `dist` its OpenCV distortion (None = pinhole)."""
+    if cfg.method == "points":
+        return fuse_keyframes(keyframes, K, cfg.stride, cfg.voxel_m, cfg.max_depth_m, dist, cfg.edge_rel)
+    if cfg.method == "tsdf":
+        return fuse_tsdf(keyframes, K, cfg.stride, cfg.voxel_m, cfg.max_depth_m, dist, cfg.edge_rel,
+                         cfg.tsdf_trunc_voxels)
+    raise ConfigError(f"dense.method must be 'points' or 'tsdf', not {cfg.method!r}")
