@@ -181,7 +181,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     if sequence.groundtruth is not None:
         if progress is not None:
             progress(total, total, "evaluation")
-        ev, aligned_gt, ate_errors = _evaluate(sequence, traj, config)
+        ev, aligned_gt, ate_errors = _evaluate(sequence.groundtruth, traj, config)
         metrics.update(ev)
     for k, info in enumerate(frame_info):
         info.update(frame_index=start + k, timestamp=float(stamps[k]), tracked=bool(tracked[k]),
@@ -208,13 +208,13 @@ def _relative(smap: Map, res: TrackResult) -> tuple[int, np.ndarray]:
     return ref, inv(smap.keyframes[ref].T_WC) @ res.T_WC
 
 
-def _evaluate(sequence: Sequence, traj: Trajectory,
+def _evaluate(groundtruth: Trajectory, traj: Trajectory,
               config: PipelineConfig) -> tuple[dict, Trajectory | None, dict[float, float] | None]:
     """(metrics, ground truth aligned onto the estimate, per-frame ATE by rounded timestamp)."""
     from worker.slam.evaluation.metrics import evaluate
 
     try:
-        ev = evaluate(sequence.groundtruth, traj, config.eval.max_diff_s, config.eval.rpe_delta_s)
+        ev = evaluate(groundtruth, traj, config.eval.max_diff_s, config.eval.rpe_delta_s)
     except EvaluationError as exc:
         return {"evaluation_error": exc.message}, None, None
     errors = {round(float(t), 6): float(e) for t, e in zip(ev.matched_timestamps, ev.ate_errors)}

@@ -354,7 +354,7 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     thr = adaptive_threshold(entropy, config.threshold)
     use_sem = config.use_segmentation and potentially_dynamic is not None
     labels = split_segments(potentially_dynamic, depth_cur, config.min_segment_area, config.depth_jump) \
-        if use_sem else np.zeros((h, w), np.int32)
+        if use_sem and potentially_dynamic is not None else np.zeros((h, w), np.int32)
     # Keypoints on objects are matched exhaustively (a search radius would keep only their small motions and
     # bias the decision towards "static"); the static rest, when a pose is predicted, by the guided search.
     on_object = labels[_pixel(kp_cur[:, 1], h), _pixel(kp_cur[:, 0], w)] > 0 if use_sem else None
@@ -381,10 +381,10 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     if config.grow_px > 0 and moving_label.any():
         # the grown pixels join their segment, so the local decisions below judge them with its points
         labels = labels.copy()
-        for lab in np.flatnonzero(moving_label):
-            grown = grow_by_depth(labels == lab, depth_cur, config.grow_px, config.grow_rel_depth,
+        for grow_lab in np.flatnonzero(moving_label):
+            grown = grow_by_depth(labels == grow_lab, depth_cur, config.grow_px, config.grow_rel_depth,
                                   config.depth_jump)
-            labels[grown & (labels == 0)] = lab
+            labels[grown & (labels == 0)] = grow_lab
         point_label = labels[yi, xi]
     # one pass over the image for all segments (none when nothing moves)
     dynamic = np.take(moving_label, labels) if moving_label.any() else np.zeros((h, w), bool)  # = moving_label[labels]

@@ -139,7 +139,7 @@ class CullingStage:
                                segments=len(res.segments))
             if res.entropy is not None:
                 inputs.info["motion_entropy"] = res.entropy
-            if self.scores is not None and frame.index < len(ctx.truth):
+            if self.scores is not None and ctx.truth is not None and frame.index < len(ctx.truth):
                 self.scores.add_mask(frame.index, res.dynamic_mask)
                 self.scores.add_features(frame.index, feats.uv[removed], feats.uv[~removed])
         elif self.use_segmentation and inputs.potentially_dynamic is not None and len(feats):

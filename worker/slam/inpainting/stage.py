@@ -88,13 +88,12 @@ class RestorationStage:
         T_pred = ctx.T_WC_pred
         if T_pred is None:  # before the first tracked frame there is no pose to warp into
             return
-        posed = [p for p in self.past if p.T_WC is not None]
+        posed = [(p, p.T_WC) for p in self.past if p.T_WC is not None]
         sel = select_references(Candidate(frame.index, T_pred, desc),
-                                [Candidate(p.index, p.T_WC, p.desc) for p in posed], self.cfg.references)
+                                [Candidate(p.index, T_WC, p.desc) for p, T_WC in posed], self.cfg.references)
         self.relaxed += int(sel.relaxed)
-        by_index = {p.index: p for p in posed}
-        refs = [ReferenceView(by_index[i].rgb, by_index[i].depth, by_index[i].T_WC, by_index[i].dynamic)
-                for i in sel.indices]
+        by_index = {p.index: (p, T_WC) for p, T_WC in posed}
+        refs = [ReferenceView(p.rgb, p.depth, T_WC, p.dynamic) for p, T_WC in (by_index[i] for i in sel.indices)]
         out = restore_frame(frame.rgb, frame.depth, hole, T_pred, refs, self.camera.K, self.cfg.restoration)
         inputs.restored_rgb, inputs.restored_depth = out.rgb, out.depth
         self.restored_frames += 1

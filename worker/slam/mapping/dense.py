@@ -40,7 +40,8 @@ def backproject_keyframe(kf: KeyFrame, K: np.ndarray, stride: int, max_depth: fl
     `rays` (h,w,2) normalised coordinates of the grid (see `pixel_rays`); pinhole without distortion if None.
     Pixels at depth edges (relative jump > `edge_rel` in the 3x3 neighbourhood; 0 = keep all) are dropped.
     """
-    d = kf.depth_small
+    d, rgb = kf.depth_small, kf.rgb_small
+    assert d is not None and rgb is not None, "only keyframes that kept their RGB-D copy are back-projected"
     if rays is None:
         rays = pixel_rays(K, None, d.shape, stride)
     ok = (d > 0) & (d < max_depth)
@@ -51,7 +52,7 @@ def backproject_keyframe(kf: KeyFrame, K: np.ndarray, stride: int, max_depth: fl
     y = rays[..., 1][ok] * z
     Xc = np.column_stack([x, y, z])
     Xw = Xc @ kf.T_WC[:3, :3].T + kf.T_WC[:3, 3]
-    return Xw, kf.rgb_small[ok]
+    return Xw, rgb[ok]
 
 
 def voxel_filter(xyz: np.ndarray, rgb: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:

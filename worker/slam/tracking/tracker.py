@@ -94,6 +94,7 @@ class Tracker:
             return self._initialise(index, timestamp, feats, rgb, dense_depth)
 
         pred = self.motion.predict()
+        assert pred is not None and self.ref_kf is not None, "the map's first keyframe set both"
         est, pids = self._track_local_map(feats, pred)
         relocalised = False
         if est is None:
@@ -103,7 +104,7 @@ class Tracker:
             self.lost_streak += 1
             self.motion.reset(pred)  # keep the prediction as the last pose; forget the velocity
             res = TrackResult(index, timestamp, pred, False, False, feats, np.full(len(feats), -1, np.int64),
-                              None, self.ref_kf if self.ref_kf is not None else 0)
+                              None, self.ref_kf)
             return res
         self.lost_streak = 0
         if relocalised:
