@@ -17,6 +17,8 @@ COPY storage ./storage
 COPY worker ./worker
 COPY backend ./backend
 COPY webui ./webui
+COPY formats ./formats
+COPY cli ./cli
 # torch==2.13.0 is already satisfied by the +cpu build above, so pip keeps it.
 RUN pip install . \
     && python -c "import torch; assert torch.version.cuda is None, 'a CUDA build slipped in'"
@@ -24,5 +26,5 @@ RUN pip install . \
 RUN useradd --create-home --uid 1000 vtd && mkdir -p /data && chown vtd:vtd /data
 USER vtd
 VOLUME ["/data"]
-EXPOSE 8000 8080
+EXPOSE 8000
 CMD ["vtdslam", "serve", "--host", "0.0.0.0"]
