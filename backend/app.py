@@ -15,6 +15,7 @@ from backend.api.deps import document_auth
 from backend.api.docs import include_docs
 from backend.api.errors import install_error_handlers
 from backend.api.pages import include_dashboard
+from backend.api.streams import StreamLimits
 from storage.artifacts import ArtifactStore
 from storage.db import init_db, make_engine, make_session_factory
 from storage.ingest import sweep_stale_uploads
@@ -99,6 +100,7 @@ def create_app(
     app.state.session_factory = session_factory
     app.state.store = ArtifactStore(settings.data_dir)
     app.state.enqueue = enqueue or LazyEnqueue(settings)
+    app.state.streams = StreamLimits(settings.max_streams_per_client)
     install_error_handlers(app)
 
     api = APIRouter(prefix=API_PREFIX)

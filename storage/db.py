@@ -16,6 +16,7 @@ from storage.errors import ConfigurationError
 from storage.settings import Settings
 
 BUSY_TIMEOUT_S = 30
+POOL_TIMEOUT_S = 10
 MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
 # Any constant: serialises concurrent migrations (api and worker starting together) on PostgreSQL.
 _PG_MIGRATION_LOCK = 0x76746473
@@ -38,9 +39,22 @@ def make_engine(settings: Settings, **kwargs: Any) -> Engine:
     """An engine for ``settings.resolved_database_url``; ``kwargs`` go to ``create_engine``."""
     url = normalize_url(settings.resolved_database_url)
     if url.get_backend_name() == "sqlite":
+        if url.database and url.database != ":memory:":  # in-memory SQLite uses a single-connection pool
+            _pool_kwargs(settings, kwargs)
         return _sqlite_engine(url, **kwargs)
     kwargs.setdefault("pool_pre_ping", True)  # long-lived workers outlive server-side idle timeouts
+    _pool_kwargs(settings, kwargs)
     return create_engine(url, **kwargs)
+
+
+def _pool_kwargs(settings: Settings, kwargs: dict[str, Any]) -> None:
+    """Pool size from the settings (see ``Settings.db_max_overflow`` for the sizing); a request that
+    still finds the pool empty waits ``POOL_TIMEOUT_S``, then fails, instead of hanging."""
+    if kwargs.get("poolclass") is not None:
+        return
+    kwargs.setdefault("pool_size", settings.db_pool_size)
+    kwargs.setdefault("max_overflow", settings.db_max_overflow)
+    kwargs.setdefault("pool_timeout", POOL_TIMEOUT_S)
 
 
 def _sqlite_engine(url: URL, **kwargs: Any) -> Engine:

@@ -33,6 +33,8 @@ _HTTP_CODES = {
     415: "unsupported_media_type",
     416: "range_not_satisfiable",
     422: "invalid_input",
+    429: "too_many_requests",
+    431: "headers_too_large",
 }
 
 

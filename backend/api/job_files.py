@@ -10,7 +10,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Query, Request
 from fastapi.responses import FileResponse, StreamingResponse
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from backend.api.deps import Offset, SessionDep, StoreDep
@@ -99,7 +99,7 @@ def _sse(event: str, data: str, event_id: int) -> str:
             "one `end` event when it reaches a final state, `: keep-alive` comments in between.",
             "content": {"text/event-stream": {}},
         },
-        **error_responses(404),
+        **error_responses(404, 429),
     },
 )
 async def job_events(
@@ -107,51 +107,63 @@ async def job_events(
     request: Request,
     interval: Annotated[float, Query(ge=0.1, le=10.0, description="Polling interval in seconds.")] = 0.5,
 ) -> StreamingResponse:
-    """Live progress as Server-Sent Events; the stream ends after the job's final state."""
-    # The stream outlives the request's dependencies, so it holds its own session.
-    session = request.app.state.session_factory()
-    try:
-        await run_in_threadpool(jobs.get, session, job_id)  # 404 before the stream starts
-    except BaseException:
-        session.close()
-        raise
+    """Live progress as Server-Sent Events; the stream ends after the job's final state.
+
+    Each poll opens and closes its own short session: a waiting stream holds no database connection, so
+    open dashboards never starve the pool. A client may hold ``max_streams_per_client`` streams (429 beyond).
+    """
+    factory = request.app.state.session_factory
+    await run_in_threadpool(_snapshot, factory, job_id)  # 404 before the stream starts
+    slot = request.app.state.streams.acquire(_client_key(request))
 
     async def stream() -> AsyncIterator[str]:
         try:
-            async for chunk in _events(session):
+            async for chunk in _events(factory, job_id, request, interval):
                 yield chunk
         finally:
-            session.close()
-
-    async def _events(session: Session) -> AsyncIterator[str]:
-        last, n, last_sent = None, 0, time.monotonic()
-        yield "retry: 2000\n\n"
-        while True:
-            try:
-                job = await run_in_threadpool(jobs.get, session, job_id)
-            except NotFound:
-                n += 1
-                yield _sse("deleted", json.dumps({"id": job_id}), n)
-                return
-            out = JobOut.of(job)
-            payload = out.model_dump_json(exclude={"eta_s"})
-            if payload != last:
-                last, last_sent = payload, time.monotonic()
-                n += 1
-                yield _sse("progress", out.model_dump_json(), n)
-            if job.status.is_terminal:
-                n += 1
-                yield _sse("end", json.dumps({"id": job_id, "status": job.status.value}), n)
-                return
-            if time.monotonic() - last_sent > 15:
-                last_sent = time.monotonic()
-                yield ": keep-alive\n\n"
-            if await request.is_disconnected():
-                return
-            await asyncio.sleep(interval)
+            slot.release()
 
     return StreamingResponse(
         stream(),
         media_type="text/event-stream",
         headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
     )
+
+
+def _client_key(request: Request) -> str:
+    return request.client.host if request.client else "unknown"
+
+
+def _snapshot(factory: sessionmaker[Session], job_id: str) -> JobOut:
+    """The job as the client sees it, read in a session that is closed again before returning."""
+    with factory() as session:
+        return JobOut.of(jobs.get(session, job_id))
+
+
+async def _events(
+    factory: sessionmaker[Session], job_id: str, request: Request, interval: float
+) -> AsyncIterator[str]:
+    last, n, last_sent = None, 0, time.monotonic()
+    yield "retry: 2000\n\n"
+    while True:
+        try:
+            out = await run_in_threadpool(_snapshot, factory, job_id)
+        except NotFound:
+            n += 1
+            yield _sse("deleted", json.dumps({"id": job_id}), n)
+            return
+        payload = out.model_dump_json(exclude={"eta_s"})
+        if payload != last:
+            last, last_sent = payload, time.monotonic()
+            n += 1
+            yield _sse("progress", out.model_dump_json(), n)
+        if out.status.is_terminal:
+            n += 1
+            yield _sse("end", json.dumps({"id": job_id, "status": out.status.value}), n)
+            return
+        if time.monotonic() - last_sent > 15:
+            last_sent = time.monotonic()
+            yield ": keep-alive\n\n"
+        if await request.is_disconnected():
+            return
+        await asyncio.sleep(interval)
