@@ -119,11 +119,11 @@ def test_with_a_key_run_servers_bind_loopback_only(tmp_path):
 
 
 @contextmanager
-def running_hub(store: ArtifactStore, key: str | None = None) -> Iterator[int]:
+def running_hub(store: ArtifactStore, key: str | None = None, client_timeout_s: float = 10.0) -> Iterator[int]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    hub = ViewerHub(store, HubConfig(port=port, key=key))
+    hub = ViewerHub(store, HubConfig(port=port, key=key, client_timeout_s=client_timeout_s))
     stop = threading.Event()
     thread = threading.Thread(target=serve_hub, args=(hub, stop), daemon=True)
     thread.start()
@@ -171,6 +171,16 @@ def test_hub_with_a_key_opens_runs_for_the_key_only(tmp_path):
         assert _get(url, {KEY_HEADER: "wrong"})[0] == 403
         status, _, run = _get(url, {KEY_HEADER: "k" * 64})
         assert status == 200 and run["port"] > 0
+
+
+def test_hub_drops_silent_clients_and_refuses_huge_headers(tmp_path):
+    with running_hub(ArtifactStore(tmp_path), client_timeout_s=0.5) as port:
+        with socket.create_connection(("127.0.0.1", port), timeout=10) as silent:
+            silent.sendall(b"GET /health HTTP/1.1\r\n")  # ...and never finishes its headers
+            assert silent.recv(1024) == b""  # closed by the hub, not by our 10 s timeout
+        with socket.create_connection(("127.0.0.1", port), timeout=10) as greedy:
+            greedy.sendall(b"GET /health HTTP/1.1\r\nX-Big: " + b"a" * 70_000 + b"\r\n\r\n")
+            assert greedy.recv(1024).startswith(b"HTTP/1.0 431")
 
 
 # ---------- the api's same-origin proxy, against a real hub and viser ----------

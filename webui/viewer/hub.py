@@ -36,8 +36,6 @@ log = logging.getLogger(__name__)
 
 KEY_HEADER = "X-VTD-Hub-Key"
 """The header carrying the hub key (``Settings.viewer_hub_key``) from the api to the hub."""
-CLIENT_TIMEOUT_S = 10.0
-"""A control client that sends nothing for this long is dropped (a slow client never holds a thread)."""
 _WILDCARDS = {"0.0.0.0": "127.0.0.1", "": "127.0.0.1", "::": "::1"}
 
 
@@ -56,6 +54,8 @@ class HubConfig:
     """Run servers kept alive at once."""
     key: str | None = field(default=None, repr=False)
     """When set: the secret ``/runs`` requires, and the run servers bind loopback."""
+    client_timeout_s: float = 10.0
+    """A control client silent this long is dropped (a slow client never holds a thread)."""
 
     @property
     def run_host(self) -> str:
@@ -131,7 +131,7 @@ class QuietHTTPServer(ThreadingHTTPServer):
 
 def _handler(hub: ViewerHub) -> type[BaseHTTPRequestHandler]:
     class Handler(BaseHTTPRequestHandler):
-        timeout = CLIENT_TIMEOUT_S  # socket timeout for every read: slow clients are dropped
+        timeout = hub.config.client_timeout_s  # socket timeout for every read: slow clients are dropped
 
         def _send(self, status: int, body: dict[str, Any]) -> None:
             payload = json.dumps(body).encode()
