@@ -206,3 +206,15 @@ def test_api_docs_render_offline(page, service: Service, path: str, rendered: st
     assert "VTD-SLAM" in pg.title()
     assert blocked == [] and not _off_origin(requested, service)
     assert not errors, errors
+
+
+def test_the_dashboards_api_link_opens_the_docs_offline(page, service: Service) -> None:
+    pg, errors, requested = page
+    pg.route("**/*", lambda route: route.continue_() if urlsplit(route.request.url).hostname == HOST
+             else route.abort())
+    pg.goto(service.base + "/", wait_until="load")
+    pg.get_by_role("link", name="API", exact=True).click()
+    pg.wait_for_selector(".swagger-ui .opblock", timeout=30_000)
+    assert urlsplit(pg.url).path == "/docs"
+    assert not _off_origin(requested, service)
+    assert not errors, errors
