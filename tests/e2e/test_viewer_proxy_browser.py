@@ -162,7 +162,16 @@ def test_everything_binds_the_host_it_was_told(service: Service) -> None:
     assert not _listening("127.0.0.1", service.port) and not _listening("127.0.0.1", service.viewer_port)
 
 
-def test_the_runs_viewer_opens_through_the_apis_origin(page, service: Service, job_id: str) -> None:
+@pytest.fixture(scope="module")
+def shots(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Where screenshots go: ``$VTD_SCREENSHOT_DIR`` or a temp folder (its path is printed)."""
+    d = Path(os.environ.get("VTD_SCREENSHOT_DIR") or tmp_path_factory.mktemp("screenshots"))
+    d.mkdir(parents=True, exist_ok=True)
+    print(f"screenshots in {d}")
+    return d
+
+
+def test_the_runs_viewer_opens_through_the_apis_origin(page, service: Service, job_id: str, shots: Path) -> None:
     pg, errors, requested = page
     r = httpx.get(f"{service.base}/api/v1/jobs/{job_id}/viewer", timeout=30)
     assert r.status_code == 200, r.text
@@ -183,7 +192,11 @@ def test_the_runs_viewer_opens_through_the_apis_origin(page, service: Service, j
     assert frames, f"no scene message through the proxy; sockets {sockets}, errors {errors}\n{service.tail()}"
     assert sockets == [f"ws://{HOST}:{service.port}/viewer/{job_id}"]
     pg.wait_for_selector("canvas", timeout=SCENE_TIMEOUT_MS)
+    # the run's own controls, built by the hub's scene code, arrived over the proxied socket
+    pg.get_by_text(f"Run {job_id[:8]}", exact=True).wait_for(timeout=SCENE_TIMEOUT_MS)
+    pg.get_by_text("Ground truth", exact=True).wait_for(timeout=SCENE_TIMEOUT_MS)
     pg.wait_for_timeout(2000)  # let the first frames render before judging the console
+    pg.screenshot(path=str(shots / "viewer_through_api_origin.png"))
     assert not _off_origin(requested + sockets, service)
     assert not errors, errors
 
