@@ -1,8 +1,11 @@
 """The dashboard in headless Chromium against real processes (api + worker + viewer) on a temp data dir.
 
 Through the pages only: upload a generated sequence (drag-and-drop input, progress), see a refused upload's
-error in words, start a job, follow it live to the end, check the job page's metrics table and SVG plots,
-open the embedded 3D viewer (≥ 10 s of real time for SwiftShader's WebGL), run a batch and read its table.
+error in words, the same archive again refused as a duplicate, an upload cancelled half-way leave nothing
+behind, start a job, follow it live to the end, see it on the first page, check the job page's metrics table,
+truth scores and SVG plots, open the embedded 3D viewer (≥ 10 s of real time for SwiftShader's WebGL), run a
+named batch and read its table, plots and truth scores, see a cancelled job shown as cancelled; then every
+page at 400 and 1400 px wide: no sideways page scroll, every button on screen, no console error.
 Screenshots of every page go to ``$VTD_SCREENSHOT_DIR`` (default: a temp folder printed by the test); the
 job page's time to first render and page weight on loopback are printed.
 
@@ -31,6 +34,8 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-backg
 JOB_TIMEOUT_MS = 300_000  # the pipeline runs on a shared CPU
 VIEWER_WAIT_S = 12
 UPLOAD_BYTES_PER_S = 16 * 1024 * 1024
+CANCELLED_UPLOAD_BYTES_PER_S = 1024 * 1024  # slow enough to press Cancel half-way
+LAYOUT_WIDTHS = (400, 1400)
 TIMING_RUNS = 5
 
 pytestmark = pytest.mark.slow
@@ -202,6 +207,22 @@ def _shot(page, shots: Path, name: str) -> None:
     page.screenshot(path=str(shots / f"{name}.png"), full_page=True)
 
 
+def _throttle(page, bytes_per_s: int) -> None:
+    """Upload speed of the page's network (-1: unthrottled), through the DevTools protocol."""
+    cdp = page.context.new_cdp_session(page)
+    cdp.send("Network.enable")
+    cdp.send("Network.emulateNetworkConditions", {"offline": False, "latency": 0, "downloadThroughput": -1,
+                                                   "uploadThroughput": bytes_per_s})
+
+
+OVERFLOW_JS = """() => ({
+    scroll: document.documentElement.scrollWidth, viewport: window.innerWidth,
+    offscreen: [...document.querySelectorAll('button, a.button')]
+        .filter((b) => b.offsetParent !== null && b.getBoundingClientRect().right > window.innerWidth + 0.5)
+        .map((b) => b.textContent.trim()),
+})"""
+
+
 def test_dashboard_flow(page, js_errors: list[str], service: Processes, archive: Path, shots: Path,
                         tmp_path: Path) -> None:
     expect = pytest.importorskip("playwright.sync_api").expect
@@ -222,17 +243,13 @@ def test_dashboard_flow(page, js_errors: list[str], service: Processes, archive:
     page.set_input_files("#file", str(archive))
     expect(page.locator("#file-chosen")).to_contain_text("synth_walk60.zip")
     page.select_option("#camera", "tum3")
-    cdp = page.context.new_cdp_session(page)  # a slow link, so the progress bar is seen moving
-    cdp.send("Network.enable")
-    cdp.send("Network.emulateNetworkConditions", {"offline": False, "latency": 0, "downloadThroughput": -1,
-                                                   "uploadThroughput": UPLOAD_BYTES_PER_S})
+    _throttle(page, UPLOAD_BYTES_PER_S)  # a slow link, so the progress bar is seen moving
     page.click("#upload-btn")
     page.wait_for_function("() => { const b = document.getElementById('upload-bar');"
                            " return b.hasAttribute('value') && b.value > 0.05 && b.value < 0.95; }", timeout=60_000)
     expect(page.locator("#upload-text")).to_contain_text(" of ")
     _shot(page, shots, "02a_sequences_upload_progress")
-    cdp.send("Network.emulateNetworkConditions", {"offline": False, "latency": 0, "downloadThroughput": -1,
-                                                   "uploadThroughput": -1})
+    _throttle(page, -1)
     row = page.locator("#seq-body tr", has_text="synth_walk60")
     expect(row).to_be_visible(timeout=120_000)
     expect(page.locator("#upload-text")).to_contain_text("60 frames")
@@ -240,6 +257,30 @@ def test_dashboard_flow(page, js_errors: list[str], service: Processes, archive:
     page.wait_for_function("() => [...document.querySelectorAll('img.thumb')].every(i => i.complete)")
     assert page.evaluate("document.querySelector('img.thumb').naturalWidth") > 0
     _shot(page, shots, "02_sequences_uploaded")
+
+    # --- the same archive again: a duplicate, named, with the way to add it anyway ---
+    page.set_input_files("#file", str(archive))
+    page.click("#upload-btn")
+    expect(err).to_contain_text("already uploaded as \"synth_walk60\"", timeout=120_000)
+    expect(page.locator("#upload-anyway")).to_be_visible()
+    _shot(page, shots, "02b_sequences_duplicate_refused")
+
+    # --- an upload cancelled half-way: said so, and the api keeps nothing of it ---
+    _throttle(page, CANCELLED_UPLOAD_BYTES_PER_S)
+    page.set_input_files("#file", str(archive))
+    page.click("#upload-btn")
+    page.wait_for_function("() => document.getElementById('upload-bar').value > 0.02", timeout=60_000)
+    page.click("#upload-cancel")
+    expect(page.locator("#upload-note")).to_contain_text("Upload cancelled; nothing was stored")
+    expect(page.locator("#upload-progress")).to_be_hidden()
+    _throttle(page, -1)
+    staging = Path(service.env["VTD_DATA_DIR"]) / "staging"
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and staging.exists() and any(staging.iterdir()):
+        time.sleep(0.2)  # the api sees the disconnect on its next read, then removes the staged part
+    assert not (staging.exists() and any(staging.iterdir())), sorted(p.name for p in staging.iterdir())
+    assert httpx.get(f"{service.base}/api/v1/sequences", timeout=10).json()["total"] == 1
+    expect(page.locator("#seq-body tr")).to_have_count(1)
 
     # --- start a job with orb-only; the job page follows it live ---
     for box in page.locator('input[name="preset"]:checked').all():  # the default preset is pre-checked
@@ -253,6 +294,14 @@ def test_dashboard_flow(page, js_errors: list[str], service: Processes, archive:
                            timeout=JOB_TIMEOUT_MS)
     _shot(page, shots, "03_job_live")  # progress streamed over SSE (unless the run was quicker than the shot)
     expect(page.locator("#job-status .badge")).to_have_text("succeeded", timeout=JOB_TIMEOUT_MS)
+
+    # --- the first page: the run just finished (linked), and the sequence's row shows it as its latest ---
+    page.goto("/")
+    expect(page.locator(f'#recent-runs li[data-job="{job_id}"] a[href="/jobs/{job_id}"]')).to_be_visible()
+    expect(page.locator("#recent-runs")).to_contain_text("orb-only")
+    latest = page.locator("#seq-body tr", has_text="synth_walk60").locator(f'a.latest[href="/jobs/{job_id}"]')
+    expect(latest).to_contain_text("succeeded")
+    _shot(page, shots, "03b_first_page")
 
     # --- the jobs list shows it with its headline ATE ---
     page.goto("/jobs")
@@ -298,7 +347,7 @@ def test_dashboard_flow(page, js_errors: list[str], service: Processes, archive:
     page.click("#viewer-btn")
     frame = page.locator("#viewer")
     page.wait_for_function("() => document.getElementById('viewer').src.startsWith('http')", timeout=60_000)
-    src = frame.get_attribute("src")
+    src = frame.evaluate("f => f.src")
     assert src.startswith("http://127.0.0.1:") and src.endswith("/")
     page.frame_locator("#viewer").locator("canvas").first.wait_for(state="attached", timeout=60_000)
     expect(page.locator("#viewer-error")).to_be_hidden()
@@ -307,24 +356,96 @@ def test_dashboard_flow(page, js_errors: list[str], service: Processes, archive:
     page.locator("#viewer-wrap").screenshot(path=str(shots / "06_viewer.png"))
     _shot(page, shots, "07_job_with_viewer")
 
-    # --- a batch of the sequence from the Sequences page: the comparison table ---
+    # --- a named batch of the sequence from the Sequences page: table, plots, truth scores ---
     page.goto("/sequences")
     seq_row = page.locator("#seq-body tr", has_text="synth_walk60")
     seq_row.locator("input.seq-sel").check()
     for box in page.locator('input[name="preset"]:checked').all():
         box.uncheck()
-    for preset in ("orb-only", "geometry-only"):  # two presets: the table shows % change vs orb-only
+    for preset in ("full", "orb-only"):  # two presets: the table shows % change vs orb-only
         page.locator(f'input[name="preset"][value="{preset}"]').check()
+    expect(page.locator("#batch-name")).to_have_attribute("placeholder", "synth_walk60 · full vs orb-only")
+    page.fill("#batch-name", "walker, full against orb-only")
     page.click("#batch-btn")
     page.wait_for_url("**/batches/*")
+    batch_id = page.url.rstrip("/").rsplit("/", 1)[-1]
+    expect(page.locator("#batch-name")).to_have_text("Comparison: walker, full against orb-only")
+    page.goto("/")  # while it runs, the first page lists it under "Running now"
+    page.wait_for_function("() => !/Loading/.test(document.getElementById('active-runs').textContent)")
+    assert page.locator("#active-runs li[data-job]").count() >= 1 or _batch_done(service, batch_id)
+    _shot(page, shots, "08a_first_page_running")
+    page.goto(f"/batches/{batch_id}")
     expect(page.locator("#batch-status .badge")).to_have_text("finished", timeout=JOB_TIMEOUT_MS)
     table = page.locator("#compare")
     expect(table).to_contain_text("synth_walk60")
-    expect(table.locator("td.best")).to_have_count(1)
-    href = f"/api/v1/batches/{page.url.rsplit('/', 1)[-1]}/table?format=csv"
+    assert table.locator("td.best").count() >= 1  # two presets may tie (see the page's note)
+    for plot in ("#plot-ate", "#plot-fps"):
+        expect(page.locator(f"{plot} svg rect.bar")).to_have_count(2)
+    expect(page.locator("#plot-traj svg path.series")).to_have_count(3)  # ground truth, full, orb-only
+    truth = page.locator("#truth-compare")
+    expect(truth).to_be_visible()
+    full_row = truth.locator("tbody tr").filter(has=page.locator('a:text-is("full")'))
+    assert full_row.locator("td.n").first.inner_text() != "—"  # mask IoU of the full run
+    expect(page.locator("#same-results")).to_contain_text("restored_features")
+    href = f"/api/v1/batches/{batch_id}/table?format=csv"
     expect(page.locator("#csv-link")).to_have_attribute("href", href)
     csv = httpx.get(service.base + href, timeout=10)
-    assert csv.headers["content-type"].startswith("text/csv") and "ate_rmse" in csv.text.splitlines()[0]
+    assert csv.headers["content-type"].startswith("text/csv") and "mask_iou" in csv.text.splitlines()[0]
     _shot(page, shots, "08_batch")
 
+    # --- the full run's page: scores against truth ---
+    full_job = full_row.locator("a").get_attribute("href").rsplit("/", 1)[-1]
+    page.goto(f"/jobs/{full_job}")
+    expect(page.locator("#truth-card")).to_be_visible()
+    expect(page.locator("#truth-table")).to_contain_text("Mask IoU")
+    expect(page.locator("#truth-table")).to_contain_text("Restoration PSNR")
+    _shot(page, shots, "09_job_truth")
+
+    # --- a cancelled job reads as cancelled, not as an error ---
+    seq_id = httpx.get(f"{service.base}/api/v1/sequences", timeout=10).json()["items"][0]["id"]
+    queued = httpx.post(f"{service.base}/api/v1/jobs", json={"sequence_id": seq_id}, timeout=10).json()
+    assert queued["preset"] == "full"  # the documented default
+    cancelled = httpx.post(f"{service.base}/api/v1/jobs/{queued['id']}/cancel", timeout=10).json()
+    page.goto(f"/jobs/{cancelled['id']}")
+    page.wait_for_function("() => /cancelled/.test(document.getElementById('job-status').textContent)",
+                           timeout=JOB_TIMEOUT_MS)
+    expect(page.locator("#job-cancelled")).to_contain_text("Cancelled")
+    expect(page.locator("#job-error")).to_be_hidden()
+    _shot(page, shots, "10_job_cancelled")
+
     assert not js_errors, js_errors
+    _layout_at_every_width(page.context.browser, service, shots, {
+        "first_page": ("/", "#recent-runs li[data-job]"),
+        "jobs": ("/jobs", "#jobs-body tr[id]"),
+        "job_truth": (f"/jobs/{full_job}", "#truth-card:not([hidden])"),
+        "batch": (f"/batches/{batch_id}", "#plot-traj svg path.series"),
+        "job_cancelled": (f"/jobs/{cancelled['id']}", "#job-cancelled:not([hidden])"),
+    })
+
+
+def _batch_done(service: Processes, batch_id: str) -> bool:
+    return httpx.get(f"{service.base}/api/v1/batches/{batch_id}", timeout=10).json()["status"] == "finished"
+
+
+def _layout_at_every_width(browser, service: Processes, shots: Path, pages: dict[str, tuple[str, str]]) -> None:
+    """Each page, fresh, at each width: no sideways page scroll, buttons on screen, not one console error."""
+    problems = []
+    for width in LAYOUT_WIDTHS:
+        context = browser.new_context(viewport={"width": width, "height": 900}, base_url=service.base)
+        try:
+            pg = context.new_page()
+            console: list[str] = []
+            pg.on("console", lambda msg, out=console: out.append(msg.text) if msg.type == "error" else None)
+            pg.on("pageerror", lambda exc, out=console: out.append(str(exc)))
+            for name, (path, ready) in pages.items():
+                pg.goto(path)
+                pg.locator(ready).first.wait_for(timeout=60_000)
+                pg.wait_for_load_state("networkidle")
+                got = pg.evaluate(OVERFLOW_JS)
+                pg.screenshot(path=str(shots / f"{width}px_{name}.png"), full_page=True)
+                if got["scroll"] > got["viewport"] or got["offscreen"] or console:
+                    problems.append(f"{width} px {path}: {got}, console errors {console}")
+                console.clear()
+        finally:
+            context.close()
+    assert not problems, "\n".join(problems)

@@ -17,9 +17,9 @@ from fastapi.testclient import TestClient
 from backend.api.pages import STATIC_DIR, include_dashboard
 from backend.api.viewer import ViewerUnavailable, ask_hub
 from backend.app import create_app
-from webui.viewer.hub import QuietHTTPServer
 from storage.settings import Settings, get_settings
 from tests.backend.api.data import tar_gz, write_sequence
+from webui.viewer.hub import QuietHTTPServer
 
 PAGE_WEIGHT_BUDGET = 80_000
 """Bytes of the job page with its CSS and scripts (uncompressed): no frameworks, no bundles."""

@@ -15,7 +15,7 @@
       ["Sequence", seqInfo ? seqInfo.name : job.sequence_id.slice(0, 8)],
       ["Ground truth", seqInfo ? (seqInfo.has_groundtruth ? "yes" : "no") : "—"],
       ["Preset", job.preset],
-      ["Stage", job.status === "running" ? job.stage || "—" : job.status === "queued" ? "waiting" : job.status === "succeeded" ? "finished" : "stopped"],
+      ["Stage", job.status === "running" ? job.stage || "—" : job.status === "queued" ? "waiting" : job.status === "succeeded" ? "finished" : job.status === "cancelled" ? "cancelled" : "stopped"],
       ["Frames", job.frames_total ? `${job.frames_done} of ${job.frames_total}` : "—"],
       ["Queued", when(job.created_at)],
       ["Run time", seconds(jobDuration(job))],

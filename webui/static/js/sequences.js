@@ -54,7 +54,7 @@
 
   /** The api's 409 for an archive uploaded before: name the sequence, offer to add it again anyway. */
   function duplicateRefused(err, camera) {
-    showError($("upload-error"), err, "Already uploaded");
+    showError($("upload-error"), err, "Not added");
     const again = el("button", { type: "button", class: "small", id: "upload-anyway", onclick: () => {
       if (chosen) upload(uploadForm(camera, true), chosen.size);
     } }, "Upload it again anyway");
