@@ -39,3 +39,40 @@ def test_pure_pipeline_imports_only_itself():
                 if top in ours and top != "formats" and not (name == "worker.slam" or name.startswith("worker.slam.")):
                     offenders.append(f"{path.relative_to(ROOT)}: {name}")
     assert not offenders, offenders
+
+
+def test_no_folder_imports_a_folder_that_imports_it_back():
+    """Folders (packages) form no import cycle, lazy imports included. The files directly in worker/ and
+    worker/slam/ are floors of their own (DESIGN.md), so there each file counts alone; a package and its own
+    sub-packages are one family and not compared."""
+    import grimp  # import-linter's graph builder
+
+    graph = grimp.build_graph("formats", "storage", "worker", "backend", "webui", "cli", cache_dir=None)
+
+    def unit(module: str) -> str:
+        parent = module.rpartition(".")[0]
+        if (ROOT / module.replace(".", "/")).is_dir() or parent in ("worker", "worker.slam"):
+            return module
+        return parent
+
+    edges: dict[str, set[str]] = {}
+    for module in graph.modules:
+        for imported in graph.find_modules_directly_imported_by(module):
+            a, b = unit(module), unit(imported)
+            if a != b and not b.startswith(a + ".") and not a.startswith(b + "."):
+                edges.setdefault(a, set()).add(b)
+
+    def reaches(start: str, goal: str) -> bool:
+        seen, todo = set(), [start]
+        while todo:
+            node = todo.pop()
+            if node == goal:
+                return True
+            if node not in seen:
+                seen.add(node)
+                todo.extend(edges.get(node, ()))
+        return False
+
+    cycles = sorted(f"{a} -> {b} -> ... -> {a}" for a, targets in edges.items() for b in targets if reaches(b, a))
+    assert len(edges) > 20, "the graph lost the repository's packages"
+    assert not cycles, cycles
