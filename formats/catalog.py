@@ -19,8 +19,8 @@ class PipelinePreset:
 
 
 PIPELINE_PRESETS: tuple[PipelinePreset, ...] = (
-    PipelinePreset("full", "VTD-SLAM: segmentation + culling + PatchMatch restoration with restored features",
-                   ("segmentation", "culling", "restoration")),
+    PipelinePreset("full", "VTD-SLAM: MSNET segmentation + adaptive epipolar culling + background restoration "
+                   "from reference frames", ("segmentation", "culling", "restoration")),
     PipelinePreset("no-restoration", "MSNET segmentation + adaptive epipolar culling, no background restoration",
                    ("segmentation", "culling")),
     PipelinePreset("geometry-only", "epipolar/depth culling of moving clusters, no segmentation, no restoration",
