@@ -62,3 +62,22 @@ def test_delete_cascades_to_jobs(session: Session, make_sequence: Callable[..., 
     assert jobs.get(session, keep.id).id == keep.id
     with pytest.raises(NotFound):
         sequences.delete(session, seq.id)
+
+
+def test_latest_jobs_are_each_sequences_newest(session: Session, make_sequence: Callable[..., Sequence]) -> None:
+    a, b, idle = make_sequence("a"), make_sequence("b"), make_sequence("idle")
+    jobs.create(session, sequence_id=a.id, preset="full")
+    newest_a = jobs.create(session, sequence_id=a.id, preset="orb-only")
+    only_b = jobs.create(session, sequence_id=b.id, preset="full")
+    latest = sequences.latest_jobs(session, [a.id, b.id, idle.id])
+    assert {k: v.id for k, v in latest.items()} == {a.id: newest_a.id, b.id: only_b.id}
+    assert sequences.latest_jobs(session, []) == {}
+
+
+def test_find_by_content_returns_the_first_upload(session: Session) -> None:
+    first = sequences.create(session, name="first", path="p1", content_sha256="ab" * 32)
+    sequences.create(session, name="again", path="p2", content_sha256="ab" * 32)
+    sequences.create(session, name="registered", path="p3")
+    found = sequences.find_by_content(session, "ab" * 32)
+    assert found is not None and found.id == first.id
+    assert sequences.find_by_content(session, "cd" * 32) is None
