@@ -76,9 +76,11 @@
       ["Speed, tracking only", m.tracking_fps, 2, "frames/s"], ["Map points", m.map_points, 0, ""],
       ["Dense map points", m.dense_points, 0, ""], ["Peak memory", m.peak_rss_mb, 1, "MB"],
     ].filter((r) => isNum(r[1]));
-    const body2 = el("tbody", {}, ...singles.map(([k, v, d, u]) => el("tr", {}, el("td", {}, k), el("td", { class: "n", colspan: 5 }, num(v, d, u)))));
+    // Counts and speeds in a two-column table of their own: on a phone it fits, while the wide error table scrolls.
+    $("metrics-counts").replaceChildren(el("tbody", {}, ...singles.map(([k, v, d, u]) => el("tr", {}, el("td", {}, k), el("td", { class: "n" }, num(v, d, u))))));
     const t = $("metrics-table");
-    t.replaceChildren(...(rows.length ? [head, body] : []), body2);
+    t.replaceChildren(...(rows.length ? [head, body] : []));
+    t.hidden = !rows.length;
     if (m.evaluation_error) t.after(el("p", { class: "muted" }, "No ATE/RPE: " + m.evaluation_error));
   }
 
