@@ -13,6 +13,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from backend.api import batches, health, job_files, jobs, presets, sequences
 from backend.api.deps import document_auth
 from backend.api.docs import include_docs
+from backend.api.edge import EdgeMiddleware
 from backend.api.errors import install_error_handlers
 from backend.api.pages import include_dashboard
 from backend.api.streams import StreamLimits
@@ -120,4 +121,5 @@ def create_app(
             expose_headers=["Content-Disposition", "Content-Range", "Accept-Ranges"],
             max_age=600,
         )
+    app.add_middleware(EdgeMiddleware)  # added last, so outermost: every response gets its request id
     return app

@@ -55,7 +55,7 @@ def main() -> None:
                     times.append(time.perf_counter() - t0)
     times.sort()
     p99 = times[min(len(times) - 1, int(0.99 * len(times)))]
-    print(f"| streams open | requests | non-200 | p50 ms | p99 ms | max ms | database |")
+    print("| streams open | requests | non-200 | p50 ms | p99 ms | max ms | database |")
     print("|---|---|---|---|---|---|---|")
     print(f"| {codes.count(200)} | {len(times)} | {sum(s != 200 for s in statuses)} | "
           f"{statistics.median(times) * 1e3:.1f} | {p99 * 1e3:.1f} | {times[-1] * 1e3:.1f} | "

@@ -6,12 +6,12 @@ the worker cannot disagree.
 
 from __future__ import annotations
 
-import json
 import math
 from typing import Any
 
 from formats import catalog
 from storage.errors import InvalidInput
+from storage.jsonlimits import check_json, parse_json
 
 PIPELINE_PRESETS: tuple[str, ...] = tuple(p.name for p in catalog.PIPELINE_PRESETS)
 """Pipeline presets a job may name, most complete first."""
@@ -47,17 +47,15 @@ def parse_camera_spec(spec: str | dict[str, Any]) -> dict[str, Any]:
         if not text.startswith("{"):
             if text not in CAMERA_PRESETS:
                 raise InvalidInput(
-                    f"unknown camera preset {text!r}; choose one of {', '.join(CAMERA_PRESETS)} "
+                    f"unknown camera preset {text[:64]!r}; choose one of {', '.join(CAMERA_PRESETS)} "
                     "or give intrinsics as JSON",
-                    {"camera": text, "allowed": list(CAMERA_PRESETS)},
+                    {"camera": text[:64], "allowed": list(CAMERA_PRESETS)},
                 )
             return {"preset": text}
-        try:
-            spec = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InvalidInput(f"camera is not valid JSON: {exc}", {"camera": text[:200]}) from None
+        spec = parse_json(text, "camera")
     if not isinstance(spec, dict):
         raise InvalidInput("camera must be a preset name or a JSON object of intrinsics")
+    check_json(spec, "camera")
     return check_intrinsics(spec)
 
 

@@ -32,6 +32,7 @@ from storage.artifacts import ArtifactStore
 from storage.errors import Conflict, NotFound, StorageError
 from storage.jobqueue import register_run_job
 from storage.models import JobStatus
+from storage.redact import redact_paths
 from storage.repositories import jobs, metrics, sequences
 from storage.settings import Settings
 from worker.preview import write_trajectory_preview
@@ -284,6 +285,8 @@ def _finish(
     joblog: _JobLog,
 ) -> JobStatus | None:
     try:
+        # clients read the error and log.txt without a token: no absolute server paths in either
+        error = redact_paths(error, ctx.settings.data_dir) if error else error
         jobs.finish(session, job_id, status, error=error, timings=timings, attempt=attempt)
     except NotFound:
         ctx.store.delete_job(job_id)
@@ -292,7 +295,8 @@ def _finish(
         log.warning("job %s: %s", job_id, exc.message)
         return jobs.get(session, job_id).status
     try:
-        ctx.store.write_text(job_id, artifacts.LOG, "\n".join(joblog.lines) + "\n")
+        text = redact_paths("\n".join(joblog.lines), ctx.settings.data_dir)
+        ctx.store.write_text(job_id, artifacts.LOG, text + "\n")
     except (OSError, StorageError) as exc:
         log.warning("job %s: could not write its log: %s", job_id, exc)
     return status

@@ -85,6 +85,8 @@ class _Receiver:
                 raise InvalidInput(f"only one {self.file_field!r} part is allowed")
             self._is_file = True
             self.form.filename = options.get(b"filename", b"").decode("utf-8", "replace")
+            if "\x00" in self.form.filename:  # PostgreSQL refuses NUL in text: never let it reach a row
+                raise InvalidInput("the file name must not contain NUL characters")
         elif len(self.form.fields) >= MAX_FIELDS:
             raise InvalidInput("too many form fields")
 
@@ -104,7 +106,10 @@ class _Receiver:
 
     def on_part_end(self) -> None:
         if not self._is_file and self._name is not None:
-            self.form.fields[self._name] = self._value.decode("utf-8", "replace")
+            value = self._value.decode("utf-8", "replace")
+            if "\x00" in value or "\x00" in self._name:
+                raise InvalidInput(f"form field {self._name[:40]!r} must not contain NUL characters")
+            self.form.fields[self._name] = value
 
 
 async def receive_upload(request: Request, sink: Sink, *, file_field: str, max_bytes: int) -> UploadedForm:

@@ -8,7 +8,6 @@ associated like TUM's associate.py, an optional ``groundtruth.txt`` (``t tx ty t
 
 from __future__ import annotations
 
-import json
 import os
 import stat
 from dataclasses import dataclass, field
@@ -21,6 +20,7 @@ from formats.trajectory import parse_tum_trajectory
 from formats.tum_lists import parse_list
 from storage.errors import InvalidInput
 from storage.ingest.images import check_image
+from storage.jsonlimits import parse_json
 from storage.presets import check_intrinsics
 
 PRESET_SIZE = (640, 480)  # every camera preset (storage.presets.CAMERA_PRESETS) is 640x480
@@ -123,9 +123,9 @@ def read_camera_file(folder: Path) -> dict[str, Any] | None:
     if not path.exists():
         return None
     try:
-        data = json.loads(_read_text(folder, path))
-    except json.JSONDecodeError as exc:
-        raise _err(folder, path, f"not valid JSON: {exc}") from None
+        data = parse_json(_read_text(folder, path), "camera.json")
+    except InvalidInput as exc:
+        raise _err(folder, path, exc.message.removeprefix("camera.json: ")) from None
     if not isinstance(data, dict):
         raise _err(folder, path, "must be a JSON object of intrinsics")
     try:

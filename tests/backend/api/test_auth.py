@@ -323,7 +323,7 @@ def test_import_stays_inside_the_root(importer, path, status) -> None:
     client, settings, tmp = importer
     r = client.post("/api/v1/sequences/import", json={"path": path.format(tmp=tmp), "camera": "tum1"})
     assert r.status_code == status, r.text
-    assert set(r.json()["error"]) == {"code", "message", "detail"}
+    assert set(r.json()["error"]) == {"code", "message", "detail", "request_id"}
     assert client.get("/api/v1/sequences").json()["total"] == 0
 
 

@@ -59,7 +59,7 @@ def residue(data_dir: Path) -> list[str]:
 def assert_clean_rejection(client: TestClient, settings: Settings, r: Any, status: int, fragment: str) -> None:
     assert r.status_code == status, r.text[:500]
     body = r.json()
-    assert set(body) == {"error"} and set(body["error"]) == {"code", "message", "detail"}, body
+    assert set(body) == {"error"} and set(body["error"]) == {"code", "message", "detail", "request_id"}, body
     assert body["error"]["code"] == {413: "payload_too_large", 422: "invalid_input"}[status]
     assert fragment in body["error"]["message"], body["error"]["message"]
     listing = client.get("/api/v1/sequences").json()

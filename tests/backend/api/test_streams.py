@@ -11,7 +11,7 @@ from backend.app import create_app
 from storage.db import make_engine, make_session_factory
 from storage.repositories import jobs
 from storage.settings import get_settings
-from tests.backend.api.conftest import RecordingQueue, upload
+from tests.backend.api.conftest import RecordingQueue
 from tests.backend.api.live import serve
 
 STREAMS = 6
