@@ -1,7 +1,11 @@
 """The paper's ablation on dynamic sequences: presets side by side, with the truth-based scores of each stage.
 
     .venv/bin/python bench/bench_dynamic.py --sequence DIR:CAMERA [--sequence ...] [--presets a,b] \
-        [--max-frames N] [--config JSON] [--summary]
+        [--max-frames N] [--config JSON] [--summary] [--teacher TFLITE]
+
+`--teacher` adds, for each preset that segments, the same run with that TFLite model as its segmenter (e.g.
+the DeepLabV3 teacher), so MSNET and the teacher are compared in one table (`marked area`: the mean share of
+each frame's pixels the segmenter marks potentially dynamic).
 
 For each sequence × preset: ATE/RPE, frames tracked, static features used per frame, features removed,
 dynamic-feature precision/recall and mask IoU (when the sequence has `truth/`), restoration PSNR and depth
@@ -62,7 +66,7 @@ def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, override
     info = m.get("stage_info", {})
     return {
         "sequence": name or Path(seq_dir).name, "preset": label or preset, "frames": m["frames"],
-        "tracked": m["tracked"],
+        "tracked": m["tracked"], "marked": info.get("potentially_dynamic_fraction"),
         "ate": m.get("ate", {}).get("rmse"), "rpe_t": m.get("rpe", {}).get("trans", {}).get("rmse"),
         "rpe_r": m.get("rpe", {}).get("rot_deg", {}).get("rmse"),
         "kept": info.get("features_kept"), "removed": info.get("features_removed"),
@@ -83,19 +87,26 @@ def main() -> None:
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--config", default=None, help="JSON overrides applied to every preset")
     ap.add_argument("--summary", action="store_true", help="also print each preset's mean over the sequences")
+    ap.add_argument("--teacher", default=None, metavar="TFLITE",
+                    help="also run each preset that segments with this model as its segmenter (`tflite-teacher`)")
     ap.add_argument("--references", action="store_true",
                     help="also run `people-free` and `masks removed` on each sequence's truth backgrounds")
     args = ap.parse_args()
     overrides = json.loads(args.config) if args.config else None
-    print("| sequence | preset | frames | tracked | ATE rmse (m) | RPE t (m/s) | RPE r (°/s) | static feats/frame "
-          "| removed/frame | restored feats/frame | dyn. precision | dyn. recall | mask IoU | restore PSNR (dB) "
-          "| restore depth err (cm) | seg ms | cull ms (with ORB) | cull decision ms | guided frames | restore ms | fps |")
-    print("|" + "---|" * 21)
+    print("| sequence | preset | frames | tracked | marked area | ATE rmse (m) | RPE t (m/s) | RPE r (°/s) "
+          "| static feats/frame | removed/frame | restored feats/frame | dyn. precision | dyn. recall | mask IoU "
+          "| restore PSNR (dB) | restore depth err (cm) | seg ms | cull ms (with ORB) | cull decision ms "
+          "| guided frames | restore ms | fps |")
+    print("|" + "---|" * 22)
     rows = []
     for spec in args.sequence:
         seq_dir, _, camera = spec.rpartition(":")
         with tempfile.TemporaryDirectory() as tmp:
-            runs = [(seq_dir, preset, None, None) for preset in args.presets.split(",")]
+            runs: list[tuple[str, str, dict | None, str | None]] = [
+                (seq_dir, preset, None, None) for preset in args.presets.split(",")]
+            if args.teacher:
+                runs += [(seq_dir, preset, teacher_overrides(args.teacher), f"{preset} (tflite-teacher)")
+                         for preset in args.presets.split(",") if "segmentation" in get_preset(preset).stages]
             truth = load_truth(seq_dir) if args.references else None
             if truth is not None:
                 if truth.layout.depth_scale != parse_camera(camera).depth_scale:
@@ -110,8 +121,16 @@ def main() -> None:
         print_summary(rows)
 
 
+def teacher_overrides(model: str) -> dict:
+    """The preset's segmenter replaced by a TFLite model (the DeepLabV3 teacher), one thread like MSNET."""
+    if not Path(model).is_file():
+        raise SystemExit(f"--teacher: no such file {model}")
+    return {"segmentation": {"segmenter": {"backend": "tflite-teacher", "model_path": str(Path(model).resolve())}}}
+
+
 def print_row(r: dict) -> None:
-    print(f"| {r['sequence']} | {r['preset']} | {r['frames']} | {r['tracked']} | {_fmt(r['ate'], 4)} | "
+    marked = "–" if r["marked"] is None else f"{100 * r['marked']:.1f} %"
+    print(f"| {r['sequence']} | {r['preset']} | {r['frames']} | {r['tracked']} | {marked} | {_fmt(r['ate'], 4)} | "
           f"{_fmt(r['rpe_t'], 4)} | {_fmt(r['rpe_r'], 2)} | {_fmt(r['kept'], 0)} | {_fmt(r['removed'], 1)} | "
           f"{_fmt(r['restored_feats'], 1)} | {_fmt(r['precision'], 2)} | {_fmt(r['recall'], 2)} | "
           f"{_fmt(r['iou'], 2)} | {_fmt(r['psnr'], 1)} | {_fmt(r['depth_err'], 1, 100)} | "

@@ -26,6 +26,15 @@ class TrainConfig:
     """(instances JSON, image folder) pairs in COCO format; categories match by name."""
     coco_names: dict[str, str] = field(default_factory=lambda: {"person": "person", "chair": "chair"})
     """COCO category name -> our class name."""
+    mask_dirs: tuple[tuple[str, str], ...] = ()
+    """(folder, class) mask folders (`images/` + `masks/`, one labelled main subject per image: CCP). Split by
+    `datasets.hash_split`: a fixed share of them is the test split and never trained on."""
+    mask_test_fraction: float = 0.25
+    """Share of each mask folder's images (by a seeded hash of the file name) held out as its test split."""
+    mask_val_fraction: float = 0.1
+    """Share of each mask folder's images held out as its validation split (checkpoint selection)."""
+    split_seed: int = 0
+    """Seed of the hash split; changing it changes the test split (never do that between runs you compare)."""
     holdout_every: int = 5
     """Every n-th labelled image (sorted by path) is held out as the test split and never trained on."""
     val_every: int = 0
@@ -53,13 +62,17 @@ class TrainConfig:
     """Target frames get a hard label only where the teacher's top probability reaches this; elsewhere the
     soft label alone trains them."""
     forbidden: tuple[str, ...] = ("{shared}/data/tum_frames/fr3_walking_xyz",)
-    """Folders that must never feed training, validation or BN statistics (the test frame); a config whose
-    globs reach into them is rejected."""
+    """Folders (or globs of files) that must never feed training, validation or BN statistics (test frames); a
+    config whose data reaches into them is rejected. `data.ALWAYS_FORBIDDEN` (bonn_crowd_dev) is added to it
+    whatever a config says."""
     bn_extra_frames: tuple[str, ...] = ()
     """Extra globs added to the AdaBN frames (e.g. the target frames). The trainer validates the EMA weights
     without AdaBN, with AdaBN on the backgrounds and with these added, and keeps the best on validation."""
     teacher: str | None = "{shared}/models/deeplabv3_257_mv_gpu.tflite"
     """TFLite teacher for soft labels; None trains on labels and pasted masks only."""
+    extra_teachers: tuple[str, ...] = ()
+    """More TFLite teachers whose probabilities (resampled to the first teacher's grid) are averaged with its
+    own; classes a teacher lacks count as probability 0 in its vote."""
     cache_dir: str = "/tmp/msnet_cache"
     """Teacher soft labels are computed once and kept here."""
     init_weights: str | None = None
@@ -89,6 +102,9 @@ class TrainConfig:
     """Cross-entropy weight per class (people matter most to the SLAM pipeline)."""
     p_labelled: float = 0.4
     """Probability that a sample is a labelled image rather than a copy-paste composite."""
+    p_negative: float = 0.0
+    """Probability that a sample is a people-free background frame with nothing pasted (a hard negative: its
+    teacher person mass moved to background, every pixel labelled)."""
     max_pastes: int = 3
     """Up to this many cut-outs per composite (zero sometimes: pure background frames are distilled too)."""
     p_chair_paste: float = 0.3
@@ -139,7 +155,8 @@ def _from_dict(base: TrainConfig, data: dict) -> TrainConfig:
 
 
 def presets() -> dict[str, TrainConfig]:
-    """`cpu-tum`: the recipe of the shipped checkpoint (adds teacher distillation on the TUM walking_halfsphere
+    """`cpu-real`: real people at scale (issue 20; the recipe for the next checkpoint, 3 h on this CPU).
+    `cpu-tum`: the recipe of the shipped checkpoint (adds teacher distillation on the TUM walking_halfsphere
     frames). `cpu-tum-ft`: a fine-tuning experiment on top of it (needs `init_weights`, a `cpu-tum` msnet.pt).
     `cpu`: the previous recipe (no TUM frames). `paper`: the paper's hyper-parameters (for a GPU).
     `smoke`: seconds-long run for tests."""
@@ -151,7 +168,19 @@ def presets() -> dict[str, TrainConfig]:
     # Measured (MODEL_CARD.md) and not shipped: COCO held-out person IoU 0.263 -> 0.372, walking_xyz 0.697 -> 0.549.
     cpu_tum_ft = replace(cpu_tum, time_budget_min=45.0, lr=5e-4, warmup_fraction=0.02, seed=1, p_target=0.25,
                          p_labelled=0.25, p_target_background=0.25, p_distractor_paste=0.3)
+    # Real people at scale (issue 20): CCP (hash split) and COCO128 labelled samples, their full-body cut-outs
+    # pasted on 7-Scenes frames 0-899 (900-999 are held out for the false-positive figure), people-free hard
+    # negatives, and two DeepLabV3 teachers averaged on every image. Not yet trained to the end (MODEL_CARD.md).
+    kitchen = "{shared}/data/7scenes_redkitchen/data"
+    cpu_real = replace(cpu, time_budget_min=180.0, epochs=400, samples_per_epoch=2000, val_every=6,
+                       mask_dirs=(("{shared}/data/ccp_persons", "person"),), p_labelled=0.45, p_negative=0.1,
+                       backgrounds=(kitchen + "/frame-000[0-8]*.color.jpg",),
+                       forbidden=(*cpu.forbidden, kitchen + "/frame-0009*"),
+                       extra_teachers=("{shared}/models/deeplabv3_mnv2_pascal_quant.tflite",),
+                       p_distractor_paste=0.3, p_chair_paste=0.15, person_height=(0.3, 1.1),
+                       cache_dir="/tmp/msnet_cache_real")
     return {
+        "cpu-real": cpu_real,
         "cpu-tum": cpu_tum,
         "cpu-tum-ft": cpu_tum_ft,
         "cpu": cpu,

@@ -2,6 +2,7 @@
 teacher soft labels (cached)."""
 from __future__ import annotations
 
+import fnmatch
 import glob
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,13 +16,19 @@ from worker.slam.segmentation.train.augment import Cutout, extract_cutouts
 from worker.slam.segmentation.train.config import TrainConfig
 from worker.slam.segmentation.train.datasets import (
     LabelledImage,
-    instance_mask,
+    hash_split,
     load_coco_json,
+    load_mask_folder,
     load_yolo_seg,
+    object_masks,
     split_holdout,
 )
 from worker.slam.segmentation.train.mixture import MixtureDataset, SoftSet
-from worker.slam.segmentation.train.teacher_cache import soft_labels
+from worker.slam.segmentation.train.teacher_cache import ensemble_soft_labels
+
+#: Never trained on, whatever a config says: bonn_crowd_dev stands for footage the product has never seen
+#: (evaluation only: no training, fine-tuning, checkpoint selection or BN statistics on its frames).
+ALWAYS_FORBIDDEN = ("{shared}/data/bonn_crowd_dev",)
 
 
 @dataclass(frozen=True)
@@ -51,6 +58,32 @@ def load_labelled(cfg: TrainConfig) -> list[LabelledImage]:
     return items
 
 
+def split_mask_dirs(cfg: TrainConfig) -> tuple[list[LabelledImage], list[LabelledImage], list[LabelledImage]]:
+    """(train, val, test) of the mask folders (CCP), by `hash_split`; the benchmark's CCP test split."""
+    train: list[LabelledImage] = []
+    val: list[LabelledImage] = []
+    test: list[LabelledImage] = []
+    for folder, label in cfg.mask_dirs:
+        if label not in cfg.model.classes:
+            raise ConfigError(f"mask folder {folder}: class {label!r} is not one of {cfg.model.classes}")
+        a, b, c = hash_split(load_mask_folder(cfg.path(folder), label), cfg.mask_test_fraction,
+                             cfg.mask_val_fraction, cfg.split_seed)
+        train, val, test = train + a, val + b, test + c
+    return train, val, test
+
+
+def split_labelled(cfg: TrainConfig) -> tuple[list[LabelledImage], list[LabelledImage], list[LabelledImage]]:
+    """(train, val, held-out test) over all labelled sets: polygon sets by `holdout_every` / `val_every`,
+    mask folders by their hash split."""
+    items = load_labelled(cfg)
+    train, held = split_holdout(items, cfg.holdout_every) if cfg.holdout_every > 1 else (items, [])
+    train, val = split_holdout(train, cfg.val_every) if cfg.val_every > 1 else (train, [])
+    m_train, m_val, m_test = split_mask_dirs(cfg)
+    out = train + m_train, val + m_val, held + m_test
+    check_allowed(cfg, [i.image for split in out for i in split])
+    return out
+
+
 def expand(cfg: TrainConfig, patterns: tuple[str, ...]) -> list[Path]:
     """Sorted files matching the globs; refuses any file inside a `forbidden` folder (the test frames)."""
     paths: list[Path] = []
@@ -61,11 +94,12 @@ def expand(cfg: TrainConfig, patterns: tuple[str, ...]) -> list[Path]:
 
 
 def check_allowed(cfg: TrainConfig, paths) -> None:
-    bad = [cfg.path(f).resolve() for f in cfg.forbidden]
+    """Raise ConfigError for any path inside a forbidden folder or matching a forbidden glob."""
+    bad = [cfg.path(f).resolve() for f in (*ALWAYS_FORBIDDEN, *cfg.forbidden)]
     for p in paths:
         rp = Path(p).resolve()
         for b in bad:
-            if rp == b or b in rp.parents:
+            if rp == b or b in rp.parents or (glob.has_magic(str(b)) and fnmatch.fnmatch(str(rp), str(b))):
                 raise ConfigError(f"{p} is inside a forbidden (test) folder {b}; it must not be trained on")
 
 
@@ -108,40 +142,35 @@ def build_cutouts(cfg: TrainConfig, items: list[LabelledImage]) -> list[Cutout]:
     classes = cfg.model.classes
     cutouts: list[Cutout] = []
     for item in items:
-        if not item.instances:
+        if not item.instances and item.mask is None:
             continue
-        rgb = read_rgb(item.image)
-        masks = [(instance_mask(i, item.size), classes.index(i.label) if i.label in classes else 0)
-                 for i in item.instances]
-        cutouts += extract_cutouts(rgb, masks, min_height=80, min_area=3000)
+        cutouts += extract_cutouts(read_rgb(item.image), object_masks(item, classes), min_height=80, min_area=3000)
     return cutouts
 
 
 def build_training_data(cfg: TrainConfig) -> TrainingData:
-    items = load_labelled(cfg)
-    check_allowed(cfg, [i.image for i in items])
-    train, held = split_holdout(items, cfg.holdout_every) if cfg.holdout_every > 1 else (items, [])
-    train, val = split_holdout(train, cfg.val_every) if cfg.val_every > 1 else (train, [])
+    train, val, held = split_labelled(cfg)
     backgrounds = find_backgrounds(cfg)
     target_paths = expand(cfg, cfg.target_frames)
     if not train and not backgrounds:
         raise ConfigError("no training data: neither labelled images nor backgrounds were found")
     train_soft = bg_soft = None
-    if cfg.teacher is not None:
-        teacher = cfg.path(cfg.teacher)
-        if not teacher.is_file():
-            raise ConfigError(f"teacher model not found: {teacher}")
-        cache = Path(cfg.cache_dir)
+    teachers = [cfg.path(t) for t in ((cfg.teacher, *cfg.extra_teachers) if cfg.teacher is not None else ())]
+    for t in teachers:
+        if not t.is_file():
+            raise ConfigError(f"teacher model not found: {t}")
+    cache = Path(cfg.cache_dir)
+    if teachers:
         if train:
-            train_soft = soft_labels(teacher, [i.image for i in train], cfg.model.classes, cache)
+            train_soft = ensemble_soft_labels(teachers, [i.image for i in train], cfg.model.classes, cache)
         if backgrounds:
-            bg_soft = soft_labels(teacher, backgrounds, cfg.model.classes, cache)
+            bg_soft = ensemble_soft_labels(teachers, backgrounds, cfg.model.classes, cache)
     targets = None
     if target_paths:
-        if cfg.teacher is None:
+        if not teachers:
             raise ConfigError("target_frames need a teacher (they are unlabelled)")
-        targets = SoftSet(target_paths, np.asarray(soft_labels(cfg.path(cfg.teacher), target_paths,
-                                                               cfg.model.classes, Path(cfg.cache_dir))))
+        targets = SoftSet(target_paths, np.asarray(ensemble_soft_labels(teachers, target_paths, cfg.model.classes,
+                                                                        cache)))
     cutouts = build_cutouts(cfg, train) + build_cutouts(cfg, load_distractors(cfg, train))
     if targets is not None:
         cutouts += target_cutouts(cfg, targets)

@@ -1,10 +1,12 @@
-"""Labelled image sets as lists of instances: YOLO-seg polygon folders and COCO JSON files.
+"""Labelled image sets: YOLO-seg polygon folders, COCO JSON files (lists of instances) and mask folders
+(one binary mask PNG per image, e.g. the CCP person photos).
 
-Both map their own category ids onto the model's class names; instances of other categories are dropped (they
-count as background), which is what a 3-class person/chair/background model needs.
+Polygon sets map their own category ids onto the model's class names; instances of other categories are dropped
+(they count as background), which is what a 3-class person/chair/background model needs.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +33,12 @@ class LabelledImage:
     size: tuple[int, int]
     """(height, width) the polygons refer to."""
     instances: tuple[Instance, ...] = field(default_factory=tuple)
+    mask: Path | None = None
+    """A binary mask PNG (> 127 = `mask_label`) instead of polygons."""
+    mask_label: str = "person"
+    partial: bool = False
+    """Only the main subject is labelled (CCP): other pixels of its class may be unlabelled, so the background
+    is not a certain negative where a teacher sees that class."""
 
 
 def parse_yolo_seg_line(line: str, size: tuple[int, int], id_to_label: dict[int, str], path: Path,
@@ -96,6 +104,54 @@ def load_coco_json(annotations: Path, image_dir: Path, name_to_label: dict[str, 
         raise SequenceFormatError(f"malformed COCO annotation file: {exc}", path=annotations) from exc
 
 
+def load_mask_folder(root: Path, label: str, partial: bool = True) -> list[LabelledImage]:
+    """`root/images/NAME.jpg` with `root/masks/NAME.png` (255 = the labelled object, 0 = the rest)."""
+    images = sorted(p for p in (root / "images").glob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
+    if not images:
+        raise ConfigError(f"no images under {root / 'images'} (images/ + masks/ layout expected)")
+    out = []
+    for img in images:
+        mask = root / "masks" / f"{img.stem}.png"
+        if not mask.is_file():
+            raise SequenceFormatError("image has no mask", path=mask)
+        out.append(LabelledImage(img, _image_size(mask), mask=mask, mask_label=label, partial=partial))
+    return out
+
+
+def hash_split(items: list[LabelledImage], test_fraction: float, val_fraction: float, seed: int = 0
+               ) -> tuple[list[LabelledImage], list[LabelledImage], list[LabelledImage]]:
+    """(train, val, test) by a seeded hash of each file name: an image's split never depends on which other
+    images exist, so adding or removing files moves nobody across splits."""
+    def u(item: LabelledImage) -> float:
+        digest = hashlib.sha256(f"{seed}:{item.image.name}".encode()).digest()
+        return int.from_bytes(digest[:8], "big") / 2.0 ** 64
+
+    train, val, test = [], [], []
+    for item in sorted(items, key=lambda i: str(i.image)):
+        x = u(item)
+        (test if x < test_fraction else val if x < test_fraction + val_fraction else train).append(item)
+    return train, val, test
+
+
+def read_mask(item: LabelledImage) -> np.ndarray:
+    """(H, W) uint8 0/1 of a mask-folder item."""
+    assert item.mask is not None, "only for mask-folder items"
+    m = cv2.imread(str(item.mask), cv2.IMREAD_GRAYSCALE)
+    if m is None:
+        raise SequenceFormatError("not a decodable mask image", path=item.mask)
+    return (m > 127).astype(np.uint8)
+
+
+def object_masks(item: LabelledImage, classes: tuple[str, ...]) -> list[tuple[np.ndarray, int]]:
+    """(0/1 mask, class index) per labelled object; classes not in `classes` get index 0 (background)."""
+    def idx(label: str) -> int:
+        return classes.index(label) if label in classes else 0
+
+    if item.mask is not None:
+        return [(read_mask(item), idx(item.mask_label))]
+    return [(instance_mask(i, item.size), idx(i.label)) for i in item.instances]
+
+
 def instance_mask(inst: Instance, size: tuple[int, int]) -> np.ndarray:
     """(H, W) uint8 0/1 mask of one instance."""
     mask = np.zeros(size, dtype=np.uint8)
@@ -106,6 +162,9 @@ def instance_mask(inst: Instance, size: tuple[int, int]) -> np.ndarray:
 def semantic_mask(item: LabelledImage, classes: tuple[str, ...]) -> np.ndarray:
     """(H, W) uint8 class indices. Larger instances are drawn first so small ones in front stay visible."""
     out = np.zeros(item.size, dtype=np.uint8)
+    if item.mask is not None:
+        out[read_mask(item) > 0] = classes.index(item.mask_label)
+        return out
     for inst in sorted(item.instances, key=lambda i: -cv2.contourArea(i.polygons[0])):
         out[instance_mask(inst, item.size) > 0] = classes.index(inst.label)
     return out

@@ -56,7 +56,12 @@ class MixtureDataset(Dataset):
         a = random_affine(rng, rgb.shape[:2], self.out_hw, (0.8, 1.6))
         img = warp(rgb, a, self.out_hw)
         hard = warp(semantic_mask(item, self.classes), a, self.out_hw, nearest=True, border=IGNORE)
-        return img, hard, self._soft(self.labelled_soft, k, a, rgb.shape[:2]), a
+        soft = self._soft(self.labelled_soft, k, a, rgb.shape[:2])
+        if item.partial and soft is not None and item.mask_label in self.classes:
+            # Only the main subject is labelled: a bystander the teacher sees is no certain negative.
+            c = self.classes.index(item.mask_label)
+            hard[(hard == 0) & (soft[..., c] > 127)] = IGNORE
+        return img, hard, soft, a
 
     def _target(self, rng: np.random.Generator):
         """A target-domain frame with the teacher's labels (people kept): soft everywhere, hard where confident."""
@@ -73,8 +78,9 @@ class MixtureDataset(Dataset):
         hard[soft.max(-1) < self.cfg.target_confidence * 255] = IGNORE
         return hard
 
-    def _composite(self, rng: np.random.Generator):
-        on_target = self.targets is not None and rng.random() < self.cfg.p_target_background
+    def _composite(self, rng: np.random.Generator, pastes: bool = True):
+        """A background frame with 0..max_pastes cut-outs; `pastes=False`: the frame alone (a hard negative)."""
+        on_target = pastes and self.targets is not None and rng.random() < self.cfg.p_target_background
         source = self.targets if on_target else self.backgrounds
         assert source is not None, "backgrounds are always given"
         k = int(rng.integers(len(source.images)))
@@ -94,7 +100,7 @@ class MixtureDataset(Dataset):
             soft[..., 0] = np.clip(soft[..., 0].astype(np.int32) + soft[..., p], 0, 255).astype(np.uint8)
             soft[..., p] = 0
         hard = self._confident(soft) if on_target else soft.argmax(-1).astype(np.uint8)
-        for _ in range(int(rng.integers(0, self.cfg.max_pastes + 1))):
+        for _ in range(int(rng.integers(0, self.cfg.max_pastes + 1)) if pastes else 0):
             if self.distractors and rng.random() < self.cfg.p_distractor_paste:
                 cut = self.distractors[int(rng.integers(len(self.distractors)))]
                 paste(rng, img, hard, soft, cut, self.cfg.distractor_height)
@@ -116,6 +122,8 @@ class MixtureDataset(Dataset):
             img, hard, soft = self._target(rng)
         elif self.labelled and (not self.backgrounds.images or r < p_target + self.cfg.p_labelled):
             img, hard, soft, _ = self._labelled(rng, int(rng.integers(len(self.labelled))))
+        elif r < p_target + self.cfg.p_labelled + self.cfg.p_negative:
+            img, hard, soft = self._composite(rng, pastes=False)
         else:
             img, hard, soft = self._composite(rng)
         if rng.random() < 0.5:

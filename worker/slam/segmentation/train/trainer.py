@@ -15,14 +15,14 @@ import torch
 from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from tqdm import tqdm
 
+from worker.slam.errors import ConfigError
 from worker.slam.io.images import read_rgb
 from worker.slam.segmentation.evaluate import confusion, metrics_from_confusion
-from worker.slam.errors import ConfigError
 from worker.slam.segmentation.msnet.checkpoint import load_model, save_model
 from worker.slam.segmentation.msnet.model import MSNet, build_msnet
 from worker.slam.segmentation.msnet.segmenter import pick_device
-from worker.slam.segmentation.train.config import TrainConfig
 from worker.slam.segmentation.train.bn_recalibration import recalibrate_bn
+from worker.slam.segmentation.train.config import TrainConfig
 from worker.slam.segmentation.train.data import build_training_data, expand, find_backgrounds
 from worker.slam.segmentation.train.datasets import LabelledImage, semantic_mask
 from worker.slam.segmentation.train.losses import msnet_loss
