@@ -62,7 +62,8 @@ class Settings(BaseSettings):
     heartbeat_timeout_s: float = Field(default=120.0, gt=0)
     """A running job whose worker has not reported for this long is failed (workers check every 1/4 of it)."""
     requeue_orphans: int = Field(default=0, ge=0)
-    """How often a job whose worker died (orphaned or stale) is requeued automatically before it is failed."""
+    """How often a job whose worker died (orphaned or stale) is requeued automatically before it is failed;
+    at most once whatever the setting: a job whose worker died twice is failed as a poison job."""
 
     def __repr_args__(self) -> Any:
         # URLs keep their shape in logs and reprs, never their passwords

@@ -1,4 +1,6 @@
-"""Jobs of dead workers: requeued (up to ``Settings.requeue_orphans`` times) or failed, files removed.
+"""Jobs of dead workers: requeued (up to ``Settings.requeue_orphans`` times, and at most once: a job whose
+worker died twice is a poison job and failed, see ``storage.repositories.jobs.POISON_DEATHS``) or failed,
+files removed.
 
 Two ways to find them: on start a worker takes the jobs still running under its own name (its previous
 process died: see :mod:`worker.identity`), and every worker's reaper thread takes running jobs of any
@@ -47,7 +49,10 @@ def _settle(ctx: WorkerContext, reaped: Reaped, why: str) -> None:
         ctx.store.delete_job(job_id)
         ctx.store.delete_staging(f"job-{job_id}-")
     for job_id in reaped.failed:
-        log.warning("job %s %s: marked failed", job_id, why)
+        if job_id in reaped.poisoned:
+            log.error("job %s %s again: a poison job (its worker died on it twice), marked failed", job_id, why)
+        else:
+            log.warning("job %s %s: marked failed", job_id, why)
     for job_id in reaped.requeued:  # the row is queued again; now the queue message (order matters)
         log.warning("job %s %s: requeued", job_id, why)
         try:

@@ -1,8 +1,9 @@
 """Jobs and their state machine.
 
 queued → running (claim) → succeeded | failed | cancelled (finish); queued → cancelled (request_cancel);
-failed | cancelled → queued (retry); running → queued | failed (reaped: its worker died). Transitions are conditional UPDATEs checked by rowcount, so two
-workers or a worker and the api racing on one job can never both win.
+failed | cancelled → queued (retry); running → queued | failed (reaped: its worker died; a job whose
+worker died :data:`POISON_DEATHS` times is failed as a poison job). Transitions are conditional UPDATEs
+checked by rowcount, so two workers or a worker and the api racing on one job can never both win.
 """
 
 from __future__ import annotations
@@ -318,11 +319,23 @@ def retry(session: Session, job_id: str) -> Job:
     return job
 
 
+POISON_DEATHS = 2
+"""A job whose worker process died this many times in a row (automatic requeues) is a poison job: it is
+failed and never handed to another worker (one setting could kill every worker); only a manual retry
+queues it again."""
+POISON_ERROR = (
+    "poison job: its worker process died {deaths} times while running it (a setting or input that crashes "
+    "the pipeline?); it is not handed to another worker, retry it explicitly after a fix"
+)
+
+
 @dataclass
 class Reaped:
     """What reaping did to the running jobs of dead workers."""
 
     failed: list[str] = field(default_factory=list)
+    """Includes the ``poisoned`` ones."""
+    poisoned: list[str] = field(default_factory=list)
     requeued: list[str] = field(default_factory=list)
     """Back to queued (attempts + 1): the caller must put them on the queue again."""
 
@@ -332,13 +345,15 @@ class Reaped:
 
 
 def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeue_limit: int) -> Reaped:
-    """Requeue (up to ``requeue_limit`` times per job) or fail the running jobs matching ``conds``.
+    """Requeue (up to ``requeue_limit`` times per job, and never a poison job) or fail the running jobs
+    matching ``conds``.
 
     Both are conditional UPDATEs on ``status = running`` in one transaction, so two reapers racing
     (every worker runs one) requeue or fail each job once.
     """
     running = [Job.status == JobStatus.RUNNING, *conds]
     reaped = Reaped()
+    requeue_limit = min(requeue_limit, POISON_DEATHS - 1)
     with writing(session):
         if requeue_limit > 0:
             stmt = (
@@ -353,6 +368,15 @@ def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeu
             if reaped.requeued:  # a worker killed while saving may have stored some
                 session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id.in_(reaped.requeued)))
                 session.execute(sql_delete(FrameStat).where(FrameStat.job_id.in_(reaped.requeued)))
+        stmt = (  # this death follows automatic requeues after earlier ones: a poison job
+            update(Job)
+            .where(*running, Job.requeues >= POISON_DEATHS - 1, Job.cancel_requested.is_(False))
+            .values(status=JobStatus.FAILED, finished_at=utcnow(),
+                    error=POISON_ERROR.format(deaths=POISON_DEATHS))
+            .returning(Job.id)
+            .execution_options(synchronize_session=False)
+        )
+        reaped.poisoned = list(session.scalars(stmt))
         stmt = (
             update(Job)
             .where(*running)
@@ -360,7 +384,7 @@ def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeu
             .returning(Job.id)
             .execution_options(synchronize_session=False)
         )
-        reaped.failed = list(session.scalars(stmt))
+        reaped.failed = [*reaped.poisoned, *session.scalars(stmt)]
         if reaped.failed:  # a failed job never shows the half of a result
             session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id.in_(reaped.failed)))
             session.execute(sql_delete(FrameStat).where(FrameStat.job_id.in_(reaped.failed)))

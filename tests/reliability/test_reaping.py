@@ -5,6 +5,7 @@ import json
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -206,3 +207,27 @@ def test_two_reapers_racing_requeue_a_job_once(tmp_path):
     for t in threads:
         t.join()
     assert queue == [job_id] and _get(ctxs[0], job_id).attempts == 2
+
+
+@pytest.mark.parametrize("path", ["orphan", "stale"])
+def test_a_job_whose_worker_died_twice_is_a_poison_job(tmp_path, path):
+    """However many requeues the deployment allows, the second death fails the job as a poison job (one
+    setting that crashes the pipeline would kill every worker); only an explicit retry queues it again."""
+    settings = get_settings(data_dir=tmp_path / "data", requeue_orphans=5)
+    queue: list[str] = []
+    ctx = _ctx(settings, "w1", enqueue=queue.append)
+    job_id = _job(ctx)
+
+    def die() -> Any:
+        _dead_worker_job(ctx, job_id, "w1")
+        return reap_orphans(ctx) if path == "orphan" else reap_stale(ctx, timeout_s=-1.0)
+
+    assert die().requeued == [job_id]
+    reaped = die()
+    assert reaped.poisoned == reaped.failed == [job_id] and reaped.requeued == []
+    got = _get(ctx, job_id)
+    assert got.status == JobStatus.FAILED and got.error.startswith("poison job") and queue == [job_id]
+    assert reap_stale(ctx, timeout_s=-1.0).all == [] and queue == [job_id]  # never handed on again
+    with ctx.session_factory() as s:
+        assert jobs.retry(s, job_id).status == JobStatus.QUEUED  # the explicit request
+    assert die().requeued == [job_id]  # a fresh budget after the retry
