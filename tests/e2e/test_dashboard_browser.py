@@ -421,6 +421,14 @@ def test_dashboard_flow(page, js_errors: list[str], service: Processes, archive:
         "job_cancelled": (f"/jobs/{cancelled['id']}", "#job-cancelled:not([hidden])"),
     })
 
+    # --- last (it adds a second sequence): the duplicate added anyway, on request ---
+    page.goto("/sequences")
+    page.set_input_files("#file", str(archive))
+    page.click("#upload-btn")
+    page.locator("#upload-anyway").click(timeout=120_000)
+    expect(page.locator("#seq-body tr", has_text="synth_walk60")).to_have_count(2, timeout=120_000)
+    assert not js_errors, js_errors
+
 
 def _batch_done(service: Processes, batch_id: str) -> bool:
     return httpx.get(f"{service.base}/api/v1/batches/{batch_id}", timeout=10).json()["status"] == "finished"
