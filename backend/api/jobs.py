@@ -13,6 +13,7 @@ from backend.api.deps import Auth, Enqueue, EnqueueDep, Limit, Offset, SessionDe
 from backend.api.errors import ApiError, error_responses
 from backend.api.guard import GuardedRoute
 from backend.api.schemas import JobCreate, JobId, JobOut, Page
+from storage.config_ranges import check_ranges
 from storage.errors import InvalidInput
 from storage.models import JobStatus
 from storage.presets import check_preset
@@ -45,11 +46,13 @@ def enqueue_or_fail(session: Session, enqueue: Enqueue, job_ids: list[str]) -> N
 
 
 def check_config(config: dict[str, Any] | None) -> dict[str, Any] | None:
-    """Overrides are checked by the worker (it knows the config); here only their size."""
+    """Size and the core settings' valid ranges (422 naming the field and range); the worker checks
+    everything again, including stage sections."""
     if config is None:
         return None
     if len(json.dumps(json_safe(config))) > MAX_CONFIG_CHARS:
         raise InvalidInput(f"config overrides are limited to {MAX_CONFIG_CHARS} characters")
+    check_ranges(config)
     return config
 
 

@@ -9,69 +9,78 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 from worker.slam.errors import ConfigError
 
 
+def valid(default: Any, lo: float, hi: float) -> Any:
+    """A numeric field's default and its documented valid range ``lo..hi`` (inclusive), checked on every
+    override by :func:`_apply` and published for the api in ``formats/settings_ranges.json``
+    (``worker.slam.ranges``): a value outside it never reaches a native library (``n_levels: 0``
+    segfaulted OpenCV's ORB)."""
+    return field(default=default, metadata={"range": (lo, hi)})
+
+
 @dataclass
 class FeatureConfig:
-    n_features: int = 1000
+    n_features: int = valid(1000, 10, 100_000)
     """ORB keypoints per frame after grid balancing."""
-    scale_factor: float = 1.2
+    scale_factor: float = valid(1.2, 1.01, 4.0)
     """Scale between pyramid levels."""
-    n_levels: int = 8
+    n_levels: int = valid(8, 1, 16)
     """Pyramid levels."""
-    fast_threshold: int = 10
+    fast_threshold: int = valid(10, 1, 255)
     """FAST threshold; low, so weakly textured grid cells still get corners (the grid keeps the best)."""
-    grid_cell_px: int = 40
+    grid_cell_px: int = valid(40, 4, 1_024)
     """Side of the grid cells that balance keypoints across the image."""
-    min_depth_m: float = 0.1
+    min_depth_m: float = valid(0.1, 0.0, 100.0)
     """Depth below this is treated as invalid."""
-    max_depth_m: float = 6.0
+    max_depth_m: float = valid(6.0, 0.01, 1000.0)
     """Depth above this is treated as invalid (noisy far range)."""
-    depth_edge_radius_px: int = 0
+    depth_edge_radius_px: int = valid(0, 0, 64)
     """> 0: keypoints within this many pixels of a depth edge or hole get no depth (colour/depth misregistration)."""
 
 
 @dataclass
 class TrackingConfig:
-    search_radius_px: float = 12.0
+    search_radius_px: float = valid(12.0, 0.5, 500.0)
     """Projection-search window radius at octave 0 (scaled by the keypoint's scale)."""
-    refine_radius_px: float = 4.0
+    refine_radius_px: float = valid(4.0, 0.5, 500.0)
     """Radius of the second, local-map search after the first pose estimate."""
-    max_hamming: int = 80
+    max_hamming: int = valid(80, 0, 256)
     """Largest descriptor distance accepted by projection search."""
-    ratio: float = 0.9
+    ratio: float = valid(0.9, 0.1, 1.0)
     """Best/second-best distance ratio in projection search (1 disables the test)."""
-    min_matches: int = 30
+    min_matches: int = valid(30, 4, 100_000)
     """Fewer inliers than this after pose optimisation means tracking is lost."""
-    virtual_baseline_m: float = 0.01
+    virtual_baseline_m: float = valid(0.01, 0.0001, 10.0)
     """Virtual stereo baseline that turns depth into a third (right-image) reprojection residual; it sets
     how much keypoint depth weighs in pose optimisation. ORB-SLAM2 uses ~0.08 on TUM; 7-Scenes' colour and depth
     are not exactly registered, so its depth deserves less weight (README, "Settings chosen by measurement")."""
-    huber_px: float = 2.45
+    huber_px: float = valid(2.45, 0.01, 1000.0)
     """Huber threshold (pixels) of the robust kernel, sqrt of the 2-dof 95% chi-square (5.99)."""
-    ba_rounds: int = 4
+    ba_rounds: int = valid(4, 1, 100)
     """Motion-only BA rounds; outliers are re-classified after each round."""
-    ba_iterations: int = 8
+    ba_iterations: int = valid(8, 1, 1_000)
     """Gauss-Newton iterations per round."""
-    local_map_keyframes: int = 12
+    local_map_keyframes: int = valid(12, 1, 1_000)
     """Covisible keyframes whose points form the local map."""
-    keyframe_max_frames: int = 20
+    keyframe_max_frames: int = valid(20, 1, 100_000)
     """Insert a keyframe at least this often (frames)."""
-    keyframe_min_frames: int = 0
+    keyframe_min_frames: int = valid(0, 0, 100_000)
     """Never insert keyframes closer than this (frames)."""
-    keyframe_ratio: float = 0.75
+    keyframe_ratio: float = valid(0.75, 0.0, 1.0)
     """Insert a keyframe when the tracked points fall below this fraction of the reference keyframe's."""
-    keyframe_min_close: int = 100
+    keyframe_min_close: int = valid(100, 0, 100_000)
     """Insert a keyframe when fewer close points than this are tracked (RGB-D rule of ORB-SLAM2)."""
-    close_depth_m: float = 3.5
+    close_depth_m: float = valid(3.5, 0.01, 1000.0)
     """Points closer than this count as 'close' (well-constrained depth)."""
-    reloc_keyframes: int = 10
+    reloc_keyframes: int = valid(10, 0, 1_000)
     """Recent keyframes tried by relocalisation (plus the best descriptor matches)."""
-    reloc_min_inliers: int = 30
+    reloc_min_inliers: int = valid(30, 4, 100_000)
     """PnP-RANSAC inliers needed to accept a relocalisation."""
 
 
@@ -79,21 +88,21 @@ class TrackingConfig:
 class MappingConfig:
     local_ba: bool = True
     """Run local bundle adjustment when a keyframe is inserted."""
-    local_ba_keyframes: int = 8
+    local_ba_keyframes: int = valid(8, 1, 1_000)
     """Keyframes optimised by local BA (the newest and its best covisible ones)."""
-    local_ba_iterations: int = 6
+    local_ba_iterations: int = valid(6, 1, 1_000)
     """Levenberg-Marquardt iterations of local BA."""
-    local_ba_every: int = 1
+    local_ba_every: int = valid(1, 1, 1_000)
     """Run local BA every N keyframes."""
-    cull_min_found_ratio: float = 0.25
+    cull_min_found_ratio: float = valid(0.25, 0.0, 1.0)
     """Points found in fewer than this fraction of the frames they should be visible in are culled."""
-    cull_grace_keyframes: int = 3
+    cull_grace_keyframes: int = valid(3, 0, 1_000)
     """Points younger than this (keyframes) are not culled by observation count."""
-    new_point_max_depth_m: float = 4.0
+    new_point_max_depth_m: float = valid(4.0, 0.01, 1000.0)
     """New map points are created from keyframe depth up to this distance."""
     final_global_ba: bool = True
     """Bundle-adjust all keyframes and points once at the end (the first keyframe fixed)."""
-    global_ba_iterations: int = 10
+    global_ba_iterations: int = valid(10, 0, 1_000)
     """Levenberg-Marquardt iterations of the final global BA."""
 
 
@@ -101,15 +110,15 @@ class MappingConfig:
 class LoopConfig:
     enabled: bool = True
     """Detect revisits and correct them with a pose graph."""
-    min_keyframe_gap: int = 10
+    min_keyframe_gap: int = valid(10, 1, 100_000)
     """Candidates must be at least this many keyframes older than the query."""
-    min_matches: int = 60
+    min_matches: int = valid(60, 4, 100_000)
     """Descriptor matches (ratio test) that make a candidate."""
-    min_inliers: int = 50
+    min_inliers: int = valid(50, 4, 100_000)
     """PnP-RANSAC inliers that confirm a loop."""
-    min_correction_m: float = 0.02
+    min_correction_m: float = valid(0.02, 0.0, 100.0)
     """Loops whose correction is smaller than this (and < 1 degree) are accepted but not applied."""
-    descriptors_per_keyframe: int = 400
+    descriptors_per_keyframe: int = valid(400, 10, 100_000)
     """Strongest keypoints per keyframe kept for place recognition."""
 
 
@@ -117,26 +126,29 @@ class LoopConfig:
 class DenseConfig:
     enabled: bool = True
     """Fuse keyframes into a coloured point cloud (`map.ply`)."""
-    stride: int = 4
+    stride: int = valid(4, 1, 64)
     """Pixel stride of the kept keyframe RGB-D (4 -> 160x120 at 640x480)."""
-    voxel_m: float = 0.01
+    voxel_m: float = valid(0.01, 0.001, 10.0)
     """Voxel size of the filter that merges the back-projected keyframes."""
-    max_depth_m: float = 4.0
+    max_depth_m: float = valid(4.0, 0.01, 1000.0)
     """Depth beyond this is not fused."""
-    edge_rel: float = 0.05
+    edge_rel: float = valid(0.05, 0.0, 1.0)
     """Drop pixels whose 3x3 neighbourhood jumps by more than this fraction of depth (flying pixels); 0 keeps all."""
     method: str = "points"
     """`points`: back-projected keyframes merged per voxel (keeps every surface ever seen); `tsdf`: a TSDF
     volume, where later views carve out what moved away (`worker.slam.mapping.tsdf`)."""
-    tsdf_trunc_voxels: float = 4.0
+    tsdf_trunc_voxels: float = valid(4.0, 1.0, 100.0)
     """TSDF truncation band in voxels (`method: tsdf`)."""
+    carve: bool = False
+    """Drop map points that keyframes' measured depth sees through more often than it sees them: what moved
+    away after it entered the map, e.g. a person segmentation missed (`worker.slam.mapping.carve`)."""
 
 
 @dataclass
 class EvalConfig:
-    max_diff_s: float = 0.02
+    max_diff_s: float = valid(0.02, 0.0001, 10.0)
     """Timestamp association tolerance against ground truth."""
-    rpe_delta_s: float = 1.0
+    rpe_delta_s: float = valid(1.0, 0.001, 1000.0)
     """RPE interval."""
 
 
@@ -252,7 +264,7 @@ def _apply(obj: Any, values: dict, where: str) -> Any:
         elif isinstance(cur, tuple) and isinstance(val, (list, tuple)):
             changes[key] = tuple(val)
         else:
-            changes[key] = _coerce(cur, val, f"{where}.{key}")
+            changes[key] = _in_range(fields[key], _coerce(cur, val, f"{where}.{key}"), f"{where}.{key}")
     if type(obj).__dataclass_params__.frozen:
         try:
             return dataclasses.replace(obj, **changes)  # runs the section's own checks (__post_init__)
@@ -267,6 +279,15 @@ def _apply(obj: Any, values: dict, where: str) -> Any:
         except ValueError as exc:
             raise ConfigError(f"invalid value in {where}: {exc}", detail={"field": where}) from exc
     return obj
+
+
+def _in_range(f: dataclasses.Field, val: Any, where: str) -> Any:
+    bounds = f.metadata.get("range")
+    if bounds is not None and not bounds[0] <= val <= bounds[1]:
+        lo, hi = bounds
+        raise ConfigError(f"{where} must be within {lo}..{hi}, got {val!r}",
+                          detail={"field": where, "min": lo, "max": hi, "value": val})
+    return val
 
 
 def _coerce(current: Any, val: Any, where: str) -> Any:
@@ -285,6 +306,8 @@ def _coerce(current: Any, val: Any, where: str) -> Any:
         if isinstance(current, float):
             if isinstance(val, bool):
                 raise ValueError(f"expected a number, got {val!r}")
+            if not math.isfinite(float(val)):
+                raise ValueError(f"expected a finite number, got {val!r}")
             return float(val)
         if isinstance(current, str):
             return str(val)

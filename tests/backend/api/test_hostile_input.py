@@ -173,3 +173,21 @@ def test_a_database_error_answers_500_with_a_request_id_and_no_sql(env, seq_tgz,
                    "request_id": r.headers["x-request-id"]}
     assert err["request_id"] in caplog.text and "INSERT INTO" in caplog.text  # the server log has it all
     assert leftovers(settings) == []
+
+
+@pytest.mark.parametrize("config, fragment", [
+    ({"features.n_levels": 0}, "features.n_levels must be within 1..16"),
+    ({"features": {"n_levels": 0}}, "features.n_levels must be within 1..16"),
+    ({"tracking.ratio": 7}, "tracking.ratio must be within 0.1..1.0"),
+    ({"features.n_features": 1e12}, "features.n_features must be within 10..100000"),
+    ({"features.n_levels": 2.5}, "features.n_levels must be an integer"),
+    ({"features.n_levels": "8"}, "features.n_levels must be an integer"),
+    ({"features.n_levelz": 8}, "unknown config field"),
+])
+def test_settings_out_of_range_are_422_naming_field_and_range(env, seq_id, config, fragment) -> None:
+    client, _ = env
+    r = client.post("/api/v1/jobs", json={"sequence_id": seq_id, "preset": "orb-only", "config": config})
+    assert_refused(client, r, 422, fragment)
+    r = client.post("/api/v1/batches", json={"sequence_ids": [seq_id], "presets": ["orb-only"], "config": config})
+    assert_refused(client, r, 422, fragment)
+    assert client.get("/api/v1/jobs").json()["total"] == 0

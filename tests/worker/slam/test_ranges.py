@@ -1,0 +1,61 @@
+"""Every core setting has a valid range, checked by the worker and published for the api: the committed
+formats/settings_ranges.json is what the config declares, and a setting that crashed a native library
+(features.n_levels: 0 segfaulted ORB) is refused with the field and the range, in a subprocess that lives."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from storage.config_ranges import check_ranges
+from storage.errors import InvalidInput
+from tests.backend.api.data import write_sequence
+from worker.slam.config import PipelineConfig
+from worker.slam.errors import ConfigError
+from worker.slam.ranges import RANGES_FILE, render, settings_ranges
+
+
+def test_the_committed_ranges_file_is_what_the_config_declares() -> None:
+    assert RANGES_FILE.read_text(encoding="utf-8") == render(), "run: python -m worker.slam.ranges"
+
+
+def test_every_numeric_core_setting_has_a_range_holding_its_default() -> None:
+    ranges = settings_ranges()
+    for section, values in PipelineConfig().to_dict().items():
+        if section in ("features", "tracking", "mapping", "loop", "dense", "eval"):
+            for name, default in values.items():
+                if isinstance(default, int | float) and not isinstance(default, bool):
+                    spec = ranges[f"{section}.{name}"]
+                    assert spec["min"] <= default <= spec["max"] and spec["default"] == default
+
+
+@pytest.mark.parametrize("key", sorted(settings_ranges()))
+def test_worker_and_api_refuse_the_same_out_of_range_values(key: str) -> None:
+    spec = settings_ranges()[key]
+    below = spec["min"] - 1 if spec["type"] == "int" else spec["min"] - abs(spec["min"]) * 0.5 - 1e-3
+    for bad in (below, spec["max"] + 1):
+        with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+            PipelineConfig().with_overrides({key: bad})
+        with pytest.raises(InvalidInput, match=key.replace(".", r"\.")):
+            check_ranges({key: bad})
+    for good in (spec["min"], spec["max"]):
+        check_ranges({key: good})
+        assert PipelineConfig().with_overrides({key: good}).to_dict()[key.split(".")[0]][key.split(".")[1]] == good
+
+
+def _run(seq: Path, out: Path, config: str) -> subprocess.CompletedProcess[str]:
+    cmd = [str(Path(sys.executable).parent / "vtdslam"), "run", str(seq), "--out", str(out),
+           "--preset", "orb-only", "--quiet", "--config", config]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+
+
+def test_n_levels_zero_is_refused_and_extremes_inside_the_ranges_run(tmp_path: Path) -> None:
+    seq = write_sequence(tmp_path / "seq", n=4)
+    done = _run(seq, tmp_path / "out0", '{"features.n_levels": 0}')
+    assert done.returncode > 0, done  # an error exit, not a signal (the segfault was -11)
+    assert "features.n_levels must be within 1..16" in done.stdout + done.stderr
+    edges = '{"features": {"n_levels": 1, "n_features": 10, "scale_factor": 4.0, "grid_cell_px": 4}}'
+    done = _run(seq, tmp_path / "out1", edges)
+    assert done.returncode >= 0, done  # the process lives whatever tracking makes of it
