@@ -369,7 +369,7 @@ def test_dashboard_flow(page, js_errors: list[str], service: Processes, archive:
     page.wait_for_url("**/batches/*")
     batch_id = page.url.rstrip("/").rsplit("/", 1)[-1]
     expect(page.locator("#batch-name")).to_have_text("Comparison: walker, full against orb-only")
-    page.goto("/")  # while it runs, the first page lists it under "Running now"
+    page.goto("/")  # while it runs, the first page lists it under "Running and queued"
     page.wait_for_function("() => !/Loading/.test(document.getElementById('active-runs').textContent)")
     assert page.locator("#active-runs li[data-job]").count() >= 1 or _batch_done(service, batch_id)
     _shot(page, shots, "08a_first_page_running")

@@ -44,7 +44,7 @@
     try {
       const [running, queued, latest] = await Promise.all([
         api("/jobs?status=running&limit=10"), api("/jobs?status=queued&limit=10"), api("/jobs?limit=40")]);
-      const active = [...running.items, ...queued.items];
+      const active = [...running.items, ...queued.items.reverse()]; // queued in the order a worker takes them
       const recent = latest.items.filter((j) => TERMINAL.has(j.status)).sort((a, b) => finishedAt(b) - finishedAt(a)).slice(0, RECENT);
       await sequenceNames([...active, ...recent]);
       $("active-runs").replaceChildren(...(active.length ? active.map(activeItem) : [empty("Nothing is running.")]));
