@@ -12,7 +12,9 @@ from worker.slam.features.types import Features
 class KeyFrame:
     """`T_WC` 4x4 float64 (updated by BA / loop closure). `point_ids` (N,) int64 map point per keypoint
     (-1 none). `rgb_small` (h,w,3) uint8 RGB and `depth_small` (h,w) float32 metres (0 = invalid or excluded)
-    are the strided copy the dense map is fused from."""
+    are the strided copy the dense map is fused from; `measured_small` (h,w) float32 metres is the same
+    pixels' raw sensor depth, excluded regions included: where it lies behind a map point, that point was
+    not there when this keyframe looked (the map's carving)."""
 
     id: int
     frame_index: int
@@ -22,6 +24,7 @@ class KeyFrame:
     point_ids: np.ndarray
     rgb_small: np.ndarray | None = None
     depth_small: np.ndarray | None = None
+    measured_small: np.ndarray | None = None
     bow: dict[int, float] = field(default_factory=dict)
 
     @property

@@ -6,6 +6,7 @@ import numpy as np
 from worker.slam.config import DenseConfig
 from worker.slam.errors import ConfigError
 from worker.slam.map.keyframe import KeyFrame
+from worker.slam.mapping.carve import carve
 from worker.slam.mapping.dense import fuse_keyframes
 from worker.slam.mapping.tsdf import fuse_tsdf
 
@@ -16,8 +17,10 @@ def build_dense_map(keyframes: list[KeyFrame], K: np.ndarray, dist: np.ndarray |
 
     `K` 3x3 intrinsics of the full image, `dist` its OpenCV distortion (None = pinhole)."""
     if cfg.method == "points":
-        return fuse_keyframes(keyframes, K, cfg.stride, cfg.voxel_m, cfg.max_depth_m, dist, cfg.edge_rel)
-    if cfg.method == "tsdf":
-        return fuse_tsdf(keyframes, K, cfg.stride, cfg.voxel_m, cfg.max_depth_m, dist, cfg.edge_rel,
-                         cfg.tsdf_trunc_voxels)
-    raise ConfigError(f"dense.method must be 'points' or 'tsdf', not {cfg.method!r}")
+        xyz, rgb = fuse_keyframes(keyframes, K, cfg.stride, cfg.voxel_m, cfg.max_depth_m, dist, cfg.edge_rel)
+    elif cfg.method == "tsdf":
+        xyz, rgb = fuse_tsdf(keyframes, K, cfg.stride, cfg.voxel_m, cfg.max_depth_m, dist, cfg.edge_rel,
+                             cfg.tsdf_trunc_voxels)
+    else:
+        raise ConfigError(f"dense.method must be 'points' or 'tsdf', not {cfg.method!r}")
+    return carve(xyz, rgb, keyframes, K, cfg.stride) if cfg.carve else (xyz, rgb)

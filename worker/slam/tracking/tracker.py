@@ -91,7 +91,7 @@ class Tracker:
             dense_depth = np.where(exclude_mask, 0.0, depth).astype(np.float32)
 
         if len(self.map) == 0:
-            return self._initialise(index, timestamp, feats, rgb, dense_depth)
+            return self._initialise(index, timestamp, feats, rgb, dense_depth, depth)
 
         pred = self.motion.predict()
         assert pred is not None and self.ref_kf is not None, "the map's first keyframe set both"
@@ -114,7 +114,7 @@ class Tracker:
         res = TrackResult(index, timestamp, est.T_WC, True, relocalised, feats, pids, est.covariance,
                           self.ref_kf)
         if relocalised or self._need_keyframe(res):
-            res.keyframe = self._insert_keyframe(res, rgb, dense_depth)
+            res.keyframe = self._insert_keyframe(res, rgb, dense_depth, depth)
             res.ref_kf = res.keyframe.id
         self.last_point_ids = pids[pids >= 0]
         self.last_result = res
@@ -129,13 +129,13 @@ class Tracker:
     # ---- steps -------------------------------------------------------------------------------------------
 
     def _initialise(self, index: int, timestamp: float, feats: Features, rgb: np.ndarray,
-                    dense_depth: np.ndarray) -> TrackResult:
+                    dense_depth: np.ndarray, measured: np.ndarray) -> TrackResult:
         T = np.eye(4)
         res = TrackResult(index, timestamp, T, False, False, feats, np.full(len(feats), -1, np.int64), None, 0)
         if (feats.depth > 0).sum() < MIN_INIT_POINTS:
             return res  # wait for a frame with enough depth
         res.ok = True
-        res.keyframe = self._insert_keyframe(res, rgb, dense_depth)
+        res.keyframe = self._insert_keyframe(res, rgb, dense_depth, measured)
         self.motion.reset(T)
         self.last_result = res
         return res
@@ -241,7 +241,8 @@ class Tracker:
                                   int((close & tracked).sum()), int((close & ~tracked).sum()))
         return need_keyframe(s, self.tc)
 
-    def _insert_keyframe(self, res: TrackResult, rgb: np.ndarray, dense_depth: np.ndarray) -> KeyFrame:
+    def _insert_keyframe(self, res: TrackResult, rgb: np.ndarray, dense_depth: np.ndarray,
+                         measured: np.ndarray) -> KeyFrame:
         feats, pids = res.feats, res.point_ids.copy()
         p = self.map.points
         tracked = pids >= 0
@@ -255,7 +256,8 @@ class Tracker:
                               self.cfg.features.scale_factor, kf_id)
         s = self.cfg.dense.stride
         kf = KeyFrame(kf_id, res.index, res.timestamp, res.T_WC.copy(), feats, pids,
-                      rgb[::s, ::s].copy(), np.ascontiguousarray(dense_depth[::s, ::s]).copy())
+                      rgb[::s, ::s].copy(), np.ascontiguousarray(dense_depth[::s, ::s]).copy(),
+                      np.ascontiguousarray(measured[::s, ::s]).copy())
         self.map.add_keyframe(kf)
         res.point_ids = pids
         self.ref_kf = kf_id

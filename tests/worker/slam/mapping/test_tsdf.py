@@ -13,15 +13,20 @@ STRIDE = 4
 
 
 def _kf(i: int, x: float, box: bool) -> KeyFrame:
-    """A camera at (x, 0, 0) looking along +z at a wall 2 m away; `box`: a 40x30 px block 1 m away."""
+    """A camera at (x, 0, 0) looking along +z at a wall 2 m away; `box`: a 0.3 x 0.2 m block 1 m away,
+    fixed in the world (its pixels shift as the camera moves)."""
     depth = np.full((120, 160), 2.0, np.float32)
     rgb = np.full((120, 160, 3), 200, np.uint8)
     if box:
-        depth[45:75, 60:100] = 1.0
-        rgb[45:75, 60:100] = (255, 0, 0)
+        v, u = np.mgrid[0:120, 0:160] * STRIDE
+        X = x + (u - K[0, 2]) / K[0, 0]  # where each pixel's ray crosses the plane z = 1 m
+        Y = (v - K[1, 2]) / K[1, 1]
+        on = (np.abs(X) < 0.15) & (np.abs(Y) < 0.1)
+        depth[on] = 1.0
+        rgb[on] = (255, 0, 0)
     T = np.eye(4)
     T[0, 3] = x
-    return KeyFrame(i, i, float(i), T, Features.empty(), np.zeros(0, np.int64), rgb, depth)
+    return KeyFrame(i, i, float(i), T, Features.empty(), np.zeros(0, np.int64), rgb, depth, depth.copy())
 
 
 def _near(xyz: np.ndarray, z: float) -> int:

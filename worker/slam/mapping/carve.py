@@ -1,0 +1,67 @@
+"""Free-space carving of the dense map: drop points that the keyframes' measured depth sees through.
+
+Why: segmentation misses parts of people (and anything else that moves), and a missed piece enters the map
+at the moment it was seen. Every other keyframe that looks at the same place *after it left* measures the
+static surface behind it, i.e. free space where the map has a point. A static surface is never seen through
+(only occluded, which is a measurement in front of it), so a point seen through more often than it is seen
+was a passer-by. The raw sensor depth is used, masked regions included: a mask says "something that may
+move is here", never "the space in front of it is not free".
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from worker.slam.map.keyframe import KeyFrame
+
+
+def visibility_votes(xyz: np.ndarray, kf: KeyFrame, K_small: np.ndarray, rel_tol: float,
+                     min_tol_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """bool (M,) twice: `xyz` (M,3) world points this keyframe saw through (its measured depth lies behind
+    the point by more than the tolerance at every pixel of the 3x3 neighbourhood), and points it saw (depth
+    within the tolerance). The tolerance is `max(min_tol_m, rel_tol * depth)`; the neighbourhood keeps
+    points on silhouettes from counting as seen through when a pose is off by a pixel."""
+    measured = kf.measured_small
+    assert measured is not None
+    h, w = measured.shape
+    R, t = kf.T_WC[:3, :3], kf.T_WC[:3, 3]
+    Pc = (xyz - t) @ R  # world -> camera: R^T (X - t), as row vectors
+    z = Pc[:, 2]
+    front = z > 0.1
+    u = np.full(len(xyz), -1, np.int64)
+    v = np.full(len(xyz), -1, np.int64)
+    u[front] = np.rint(K_small[0, 0] * Pc[front, 0] / z[front] + K_small[0, 2]).astype(np.int64)
+    v[front] = np.rint(K_small[1, 1] * Pc[front, 1] / z[front] + K_small[1, 2]).astype(np.int64)
+    inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    nearest = cv2.erode(np.where(measured > 0, measured, np.float32(1e6)).astype(np.float32), np.ones((3, 3), np.uint8))
+    ui, vi, zi = u[inside], v[inside], z[inside]
+    tol = np.maximum(min_tol_m, rel_tol * zi)
+    d_near = nearest[vi, ui]
+    d = measured[vi, ui]
+    through = np.zeros(len(xyz), bool)
+    seen = np.zeros(len(xyz), bool)
+    through[inside] = (d_near < 1e5) & (d_near > zi + tol)
+    seen[inside] = (d > 0) & (np.abs(d - zi) <= tol)
+    return through, seen
+
+
+def carve(xyz: np.ndarray, rgb: np.ndarray, keyframes: list[KeyFrame], K: np.ndarray, stride: int,
+          rel_tol: float = 0.03, min_tol_m: float = 0.05, min_through: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """The map `xyz` (M,3) float32 world points with colours `rgb` (M,3) uint8, less the points that at least
+    `min_through` keyframes saw through and that were seen through more often than seen. `K` 3x3 full-image
+    intrinsics; the keyframes' `measured_small` holds every `stride`-th pixel (pinhole: distortion is below
+    the tolerance at this stride)."""
+    kfs = [kf for kf in keyframes if kf.measured_small is not None]
+    if not kfs or len(xyz) == 0:
+        return xyz, rgb
+    K_small = K.astype(np.float64).copy()
+    K_small[:2] /= stride
+    X = xyz.astype(np.float64)
+    n_through = np.zeros(len(X), np.int32)
+    n_seen = np.zeros(len(X), np.int32)
+    for kf in kfs:
+        through, seen = visibility_votes(X, kf, K_small, rel_tol, min_tol_m)
+        n_through += through
+        n_seen += seen
+    keep = ~((n_through >= min_through) & (n_through > n_seen))
+    return xyz[keep], rgb[keep]
