@@ -20,7 +20,8 @@ def _shared_default() -> str:
 
 
 def train_command(
-    config: Annotated[str, typer.Option(help="Preset (cpu-tum = the shipped recipe, cpu, paper, smoke) or a JSON "
+    config: Annotated[str, typer.Option(help="Preset (cpu-tum = the shipped recipe, cpu-real = real people at scale, "
+                                             "cpu, paper, smoke) or a JSON "
                                              "file (keys of TrainConfig; optional \"preset\" base).")] = "cpu-tum",
     out: Annotated[Path | None, typer.Option(help="Output folder (checkpoints, metrics.jsonl).")] = None,
     resume: Annotated[bool, typer.Option(help="Continue from OUT/last.pt.")] = False,
