@@ -4,6 +4,9 @@ Every entry is checked before a byte is written: relative UTF-8 paths only (no a
 letters, ``..`` or backslashes), regular files and folders only (links, devices and FIFOs rejected), no
 encrypted zip entries, at most ``max_files`` entries. Bytes are counted while they are written, so a
 header that lies about sizes cannot get past ``max_bytes`` or the compression-ratio limit (bombs).
+Metadata counts too: a tar's PAX and GNU long-name headers are checked (size, chain length) before
+tarfile reads them into memory, and a zip's central directory (names, extra fields, comments) is
+sized from its end record before zipfile reads it.
 """
 
 from __future__ import annotations
@@ -13,12 +16,13 @@ import gzip
 import os
 import shutil
 import stat
+import struct
 import tarfile
 import zipfile
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
-from collections.abc import Callable
 from typing import IO
 
 from storage.errors import InvalidInput, PayloadTooLarge
@@ -27,6 +31,16 @@ CHUNK = 1 << 20
 MAX_NAME_LEN = 1024
 RATIO_FLOOR = 1 << 20
 SKIPPED_TOP = {"__MACOSX"}  # resource forks macOS's archiver adds; never part of a sequence
+MAX_META_BYTES = 64 * 1024
+"""Largest PAX / GNU long-name header: names are at most MAX_NAME_LEN; tarfile reads the whole header
+into memory (a 408 KB .tar.gz with a 1.5 GB PAX header took the api to 1.67 GB)."""
+MAX_META_CHAIN = 8
+"""Metadata headers in a row before a member (tarfile recurses through them)."""
+MAX_ZIP_DIRECTORY = 64 << 20
+"""Largest zip central directory (zipfile reads it whole): ~200 000 entries with 1 KiB names."""
+_TAR_META = {
+    tarfile.XHDTYPE, tarfile.XGLTYPE, tarfile.SOLARIS_XHDTYPE, tarfile.GNUTYPE_LONGNAME, tarfile.GNUTYPE_LONGLINK,
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,6 +99,7 @@ class _Budget:
         self._packed = packed
         self.files = 0
         self.bytes = 0
+        self.meta_chain = 0
 
     @property
     def packed(self) -> int:
@@ -94,6 +109,18 @@ class _Budget:
     def max_bytes(self) -> int:
         """Small archives may always unpack to ``max_ratio`` MiB: the ratio guards against big bombs."""
         return min(self.limits.max_bytes, int(max(self.packed, RATIO_FLOOR) * self.limits.max_ratio))
+
+    def meta(self, size: int) -> None:
+        """A tar metadata header of ``size`` bytes, checked before its data is read."""
+        self.meta_chain += 1
+        if size > MAX_META_BYTES:
+            raise PayloadTooLarge(
+                f"an archive header (PAX or GNU long name) holds {size} bytes; at most {MAX_META_BYTES}",
+                {"max_header_bytes": MAX_META_BYTES},
+            )
+        if self.meta_chain > MAX_META_CHAIN:
+            raise InvalidInput(f"more than {MAX_META_CHAIN} metadata headers in a row in the archive")
+        self.add(size)
 
     def entry(self) -> None:
         self.files += 1
@@ -155,7 +182,40 @@ def _zip_name(info: zipfile.ZipInfo) -> str:
         raise InvalidInput("an archive entry's name is not UTF-8", {"entry": name}) from None
 
 
+def _zip_directory(archive: Path) -> tuple[int, int]:
+    """(entries, central directory bytes) from the end records, read before zipfile loads the directory.
+
+    (0, 0) when no end record is found: zipfile then refuses the file itself.
+    """
+    size = archive.stat().st_size
+    with open(archive, "rb") as fh:
+        fh.seek(max(0, size - (1 << 16) - 22))
+        tail = fh.read()
+        at = tail.rfind(b"PK\x05\x06")
+        if at < 0 or len(tail) - at < 22:
+            return 0, 0
+        _sig, _d, _dcd, _n, entries, cd_size, _off, _c = struct.unpack("<4s4H2LH", tail[at : at + 22])
+        loc = at - 20
+        if (entries == 0xFFFF or cd_size == 0xFFFFFFFF) and loc >= 0 and tail[loc : loc + 4] == b"PK\x06\x07":
+            (z64_at,) = struct.unpack("<Q", tail[loc + 8 : loc + 16])
+            fh.seek(z64_at)
+            rec = fh.read(56)
+            if len(rec) == 56 and rec[:4] == b"PK\x06\x06":
+                entries, cd_size = struct.unpack("<Q", rec[32:40])[0], struct.unpack("<Q", rec[40:48])[0]
+    return entries, cd_size
+
+
 def _unpack_zip(archive: Path, dest: Path, budget: _Budget) -> None:
+    entries, directory = _zip_directory(archive)
+    if entries > budget.limits.max_files:
+        budget.files = entries - 1
+        budget.entry()  # fails with the entry-count message
+    if directory > MAX_ZIP_DIRECTORY:
+        raise PayloadTooLarge(
+            f"the zip's directory (names, extra fields, comments) is larger than {MAX_ZIP_DIRECTORY} bytes",
+            {"max_directory_bytes": MAX_ZIP_DIRECTORY},
+        )
+    budget.add(directory)  # names, extra fields and comments are unpacked bytes too
     try:
         zf = zipfile.ZipFile(archive)
     except UnicodeDecodeError:
@@ -177,9 +237,9 @@ def _unpack_zip(archive: Path, dest: Path, budget: _Budget) -> None:
                 raise InvalidInput("encrypted zip entries are not supported", {"entry": info.filename})
             if rel is not None and not info.is_dir() and info.file_size > budget.max_bytes:
                 budget.add(info.file_size)  # fails with the right message before extracting
-        declared = sum(i.file_size for i in infos)
+        declared = budget.bytes + sum(i.file_size for i in infos)
         if declared > budget.max_bytes:
-            budget.add(declared)
+            budget.add(declared - budget.bytes)
         budget.files = 0
         for info in infos:
             budget.entry()
@@ -209,9 +269,25 @@ def unpack_tar_stream(fileobj: IO[bytes], dest: Path, limits: Limits, consumed: 
     return Unpacked(budget.files, budget.bytes)
 
 
+def _budgeted_tarinfo(budget: _Budget) -> type[tarfile.TarInfo]:
+    """A TarInfo that checks metadata headers before tarfile reads their data into memory."""
+
+    class BudgetedTarInfo(tarfile.TarInfo):
+        def _proc_member(self, tf: tarfile.TarFile) -> tarfile.TarInfo:
+            if self.type in _TAR_META:
+                budget.meta(self.size)
+            elif self.type == tarfile.GNUTYPE_SPARSE:  # its extension blocks are read without bound
+                raise InvalidInput("sparse archive entries are not supported", {"entry": self.name[:200]})
+            else:
+                budget.meta_chain = 0
+            return super()._proc_member(tf)  # type: ignore[misc]
+
+    return BudgetedTarInfo
+
+
 def _unpack_tar(raw: IO[bytes], dest: Path, budget: _Budget) -> None:
     try:
-        with tarfile.open(fileobj=raw, mode="r|*") as tf:
+        with tarfile.open(fileobj=raw, mode="r|*", tarinfo=_budgeted_tarinfo(budget)) as tf:
             for member in tf:  # streaming: headers are checked as they come, before their data
                 budget.entry()
                 rel = safe_relpath(member.name)
@@ -232,6 +308,8 @@ def _unpack_tar(raw: IO[bytes], dest: Path, budget: _Budget) -> None:
                 _write(dest, rel, src, budget)
     except (tarfile.TarError, EOFError, zlib.error, gzip.BadGzipFile) as exc:
         raise InvalidInput(f"not a readable .tar.gz archive: {exc}") from None
+    except RecursionError:  # headers tarfile follows recursively, beyond what MAX_META_CHAIN catches
+        raise InvalidInput("the archive's headers are nested too deeply") from None
 
 
 _NAME_ERRNOS = {errno.ENAMETOOLONG, errno.EILSEQ, errno.EINVAL}

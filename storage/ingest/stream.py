@@ -87,7 +87,7 @@ class ArchiveSink:
             except queue.Full:
                 if not self._thread.is_alive():
                     self._raise_if_failed()
-                    raise RuntimeError("the unpacking thread stopped")
+                    raise RuntimeError("the unpacking thread stopped") from None
 
     def close(self) -> None:
         if self._file is not None:

@@ -3,6 +3,8 @@ shape with a request id, no row written, no server path or SQL in the answer, li
 from __future__ import annotations
 
 import json
+import tarfile
+import tracemalloc
 from collections.abc import Iterator
 from typing import Any
 
@@ -16,6 +18,7 @@ from storage.settings import Settings, get_settings
 from tests.backend.api.conftest import RecordingQueue, leftovers, upload
 from tests.backend.api.data import tar_gz, write_sequence
 from tests.backend.api.pg import pg_schema_url
+from tests.storage.ingest.bombs import header_bomb
 
 DEEP = 255
 
@@ -191,3 +194,21 @@ def test_settings_out_of_range_are_422_naming_field_and_range(env, seq_id, confi
     r = client.post("/api/v1/batches", json={"sequence_ids": [seq_id], "presets": ["orb-only"], "config": config})
     assert_refused(client, r, 422, fragment)
     assert client.get("/api/v1/jobs").json()["total"] == 0
+
+
+@pytest.fixture(scope="module")
+def pax_bomb() -> bytes:
+    return header_bomb(tarfile.XHDTYPE, 400 << 20)
+
+
+def test_the_408_kb_pax_bomb_upload_is_4xx_with_memory_flat(env, pax_bomb) -> None:
+    client, settings = env
+    tracemalloc.start()
+    try:
+        r = upload(client, pax_bomb)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert_refused(client, r, 413, "PAX or GNU long name")
+    assert peak < 100 << 20, f"{peak / 1e6:.0f} MB"  # the api went from 157 MB to 1.67 GB
+    assert client.get("/api/v1/sequences").json()["total"] == 0 and leftovers(settings) == []
