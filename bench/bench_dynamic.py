@@ -150,7 +150,7 @@ def print_summary(rows: list[dict]) -> None:
     for preset in dict.fromkeys(r["preset"] for r in rows):
         rs = [r for r in rows if r["preset"] == preset]
         ate = [r["ate"] for r in rs if r["ate"] is not None]
-        mean = lambda k: _mean([r[k] for r in rs])  # noqa: E731
+        mean = lambda k, rs=rs: _mean([r[k] for r in rs])  # noqa: E731
         spread = f"{min(ate):.4f}–{max(ate):.4f}" if ate else "–"
         print(f"| {preset} | {len(rs)} | {_fmt(_mean(ate), 4)} | {spread} | "
               f"{sum(r['tracked'] for r in rs)}/{sum(r['frames'] for r in rs)} | {_fmt(mean('precision'), 2)} | "
@@ -163,7 +163,8 @@ def _ratio(rows: list[dict], preset: str, reference: str) -> float | None:
     seqs = [s for s, p in ate if p == reference and (s, preset) in ate]
     if not seqs:
         return None
-    return _mean([ate[s, preset] for s in seqs]) / _mean([ate[s, reference] for s in seqs])
+    num, den = _mean([ate[s, preset] for s in seqs]), _mean([ate[s, reference] for s in seqs])
+    return num / den if num is not None and den else None
 
 
 def _mean(values: list) -> float | None:

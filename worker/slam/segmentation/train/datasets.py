@@ -126,7 +126,9 @@ def hash_split(items: list[LabelledImage], test_fraction: float, val_fraction: f
         digest = hashlib.sha256(f"{seed}:{item.image.name}".encode()).digest()
         return int.from_bytes(digest[:8], "big") / 2.0 ** 64
 
-    train, val, test = [], [], []
+    train: list[LabelledImage] = []
+    val: list[LabelledImage] = []
+    test: list[LabelledImage] = []
     for item in sorted(items, key=lambda i: str(i.image)):
         x = u(item)
         (test if x < test_fraction else val if x < test_fraction + val_fraction else train).append(item)
