@@ -22,6 +22,14 @@ DEFAULT_PIPELINE_PRESET = catalog.DEFAULT_PIPELINE_PRESET
 CAMERA_PRESETS: tuple[str, ...] = tuple(sorted(catalog.CAMERA_PRESETS))
 """Camera presets a sequence may name."""
 
+FOCAL_PX = (50.0, 5000.0)
+"""Plausible focal lengths in pixels (phones and RGB-D sensors: ~300-1500 at VGA)."""
+SIZE_PX = (16, 16384)
+DEPTH_SCALE = (1.0, 100_000.0)
+"""Depth units per metre (TUM 5000, 7-Scenes 1000)."""
+MAX_DIST = 10.0
+DEFAULT_SIZE = (640, 480)
+"""The image size intrinsics refer to when they give none (every camera preset's)."""
 _CAMERA_NUMBERS = ("fx", "fy", "cx", "cy", "depth_scale")
 _CAMERA_FIELDS = {*_CAMERA_NUMBERS, "width", "height", "dist", "name"}
 
@@ -60,7 +68,10 @@ def parse_camera_spec(spec: str | dict[str, Any]) -> dict[str, Any]:
 
 
 def check_intrinsics(d: dict[str, Any]) -> dict[str, Any]:
-    """Explicit intrinsics: fx, fy, cx, cy (and depth_scale) finite and positive, a positive size."""
+    """Explicit intrinsics, finite and plausible: focal lengths within :data:`FOCAL_PX`, the principal
+    point inside the image (``width`` x ``height``, else the presets' 640x480), sizes within
+    :data:`SIZE_PX`, ``depth_scale`` within :data:`DEPTH_SCALE`, distortion within :data:`MAX_DIST`.
+    (A width of 1e15 once gave a "succeeded" job with an ATE of 1e11 m.)"""
     unknown = sorted(set(d) - _CAMERA_FIELDS)
     if unknown:
         raise InvalidInput(f"unknown camera fields: {unknown}", {"allowed": sorted(_CAMERA_FIELDS)})
@@ -82,9 +93,25 @@ def check_intrinsics(d: dict[str, Any]) -> dict[str, Any]:
         if not isinstance(dist, list) or len(dist) not in (4, 5):
             raise InvalidInput("camera dist must be a list of 4 or 5 numbers (k1 k2 p1 p2 [k3])")
         out["dist"] = [_finite(v, "dist") for v in dist]
+        if any(abs(v) > MAX_DIST for v in out["dist"]):
+            raise InvalidInput(f"camera dist coefficients must be within -{MAX_DIST}..{MAX_DIST}", {"dist": dist})
+    _check_plausible(out)
     if "name" in d:
         out["name"] = str(d["name"])[:64]
     return out
+
+
+def _check_plausible(cam: dict[str, Any]) -> None:
+    for key, (lo, hi) in (("fx", FOCAL_PX), ("fy", FOCAL_PX), ("width", SIZE_PX), ("height", SIZE_PX),
+                          ("depth_scale", DEPTH_SCALE)):
+        if key in cam and not lo <= cam[key] <= hi:
+            raise InvalidInput(f"camera {key} must be within {lo:g}..{hi:g}, got {cam[key]:g}",
+                               {"field": key, "min": lo, "max": hi, "value": cam[key]})
+    width, height = cam.get("width", DEFAULT_SIZE[0]), cam.get("height", DEFAULT_SIZE[1])
+    for key, size in (("cx", width), ("cy", height)):
+        if not 0 < cam[key] < size:
+            raise InvalidInput(f"camera {key} must lie inside the image (0..{size}), got {cam[key]:g}",
+                               {"field": key, "min": 0, "max": size, "value": cam[key]})
 
 
 def _finite(value: Any, key: str) -> float:

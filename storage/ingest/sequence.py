@@ -3,7 +3,8 @@
 Reads the files with the worker's own parsers (``formats``): ``rgb.txt`` and ``depth.txt`` of
 ``timestamp relative/path`` lines, every listed file present inside the folder, colour/depth pairs
 associated like TUM's associate.py, an optional ``groundtruth.txt`` (``t tx ty tz qx qy qz qw``) and
-``camera.json``, and a sample of images verified: 8-bit colour, 16-bit single-channel PNG depth, one size.
+``camera.json`` (plausible intrinsics), every frame's image headers checked (8-bit colour, 16-bit
+single-channel PNG depth, one size) and a sample's whole data verified.
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ from storage.jsonlimits import parse_json
 from storage.presets import check_intrinsics
 
 PRESET_SIZE = (640, 480)  # every camera preset (storage.presets.CAMERA_PRESETS) is 640x480
+MAX_GT_POSITION_M = 1e5
+"""Ground-truth positions further from the origin than this (100 km) are refused as implausible."""
 MAX_LIST_BYTES = 64 * 1024 * 1024
 
 
@@ -113,9 +116,12 @@ def read_groundtruth(folder: Path) -> int:
     if not path.exists():
         return 0
     try:
-        return len(parse_tum_trajectory(_read_text(folder, path)))
+        traj = parse_tum_trajectory(_read_text(folder, path))
     except FormatError as exc:
         raise _err(folder, path, exc.message, exc.line) from None
+    if len(traj) and float(abs(traj.positions).max()) > MAX_GT_POSITION_M:  # evaluation's SVD diverged
+        raise _err(folder, path, f"positions must lie within {MAX_GT_POSITION_M:g} m of the origin")
+    return len(traj)
 
 
 def read_camera_file(folder: Path) -> dict[str, Any] | None:
@@ -145,14 +151,15 @@ def validate_sequence(folder: Path, camera: dict[str, Any] | None = None, sample
     camera_file = read_camera_file(folder)
     n = len(pairs)
     picks = sorted({round(k * (n - 1) / max(1, samples - 1)) for k in range(min(samples, n))})
+    verified = set(picks)
     size: tuple[int, int] | None = None
-    for k in picks:
-        i, j = pairs[k]
+    for k, (i, j) in enumerate(pairs):  # every frame's headers; a sample's whole data too
+        verify = k in verified
         rgb_path, depth_path = folder / rgb[i][1], folder / depth[j][1]
-        c = check_image(rgb_path, label=rgb_path.relative_to(folder).as_posix())
+        c = check_image(rgb_path, verify=verify, label=rgb_path.relative_to(folder).as_posix())
         if c.bit_depth != 8 or c.color_type == 4:
             raise _err(folder, rgb_path, "colour images must be 8-bit grey, RGB or RGBA")
-        d = check_image(depth_path, label=depth_path.relative_to(folder).as_posix())
+        d = check_image(depth_path, verify=verify, label=depth_path.relative_to(folder).as_posix())
         if d.format != "png" or d.bit_depth != 16 or d.channels != 1:
             raise _err(folder, depth_path, "depth images must be 16-bit single-channel PNG")
         if (c.width, c.height) != (d.width, d.height):
