@@ -64,6 +64,20 @@ def evaluate(groundtruth: Trajectory, estimate: Trajectory, max_diff: float = 0.
         raise EvaluationError(f"trajectories do not associate: {exc}") from exc
     if ref.num_poses < 3:
         raise EvaluationError(f"only {ref.num_poses} poses associate within {max_diff} s; need at least 3")
+    for name, t in (("estimate", est), ("ground truth", ref)):
+        if not np.isfinite(np.asarray(t.poses_se3)).all():  # numpy's SVD would not converge on them
+            raise EvaluationError(f"the {name} has non-finite poses; ATE and RPE are unavailable",
+                                  detail={"reason": "non_finite_poses"})
+    try:
+        return _compare(groundtruth, estimate, ref, est, rpe_mode, rpe_delta_s, rpe_max_pairs)
+    except (np.linalg.LinAlgError, ValueError, ArithmeticError) as exc:  # a run keeps its outputs regardless
+        raise EvaluationError(f"the metrics could not be computed: {type(exc).__name__}: {exc}",
+                              detail={"reason": "numerical_failure"}) from exc
+
+
+def _compare(groundtruth: Trajectory, estimate: Trajectory, ref: PoseTrajectory3D, est: PoseTrajectory3D,
+             rpe_mode: RpeMode, rpe_delta_s: float, rpe_max_pairs: int) -> EvalResult:
+    """ATE after SE(3) alignment and RPE of the associated ``ref`` / ``est`` poses."""
     try:
         r_a, t_a, _ = est.align(ref, correct_scale=False)  # maps the estimate's world into the GT's
     except GeometryException as exc:
@@ -75,6 +89,9 @@ def evaluate(groundtruth: Trajectory, estimate: Trajectory, max_diff: float = 0.
     ape = metrics.APE(metrics.PoseRelation.translation_part)
     ape.process_data((ref, est))
     rpe = relative_pose_error(groundtruth, estimate, rpe_mode, rpe_delta_s, rpe_max_pairs)
+    if not np.isfinite(np.asarray(ape.error)).all():
+        raise EvaluationError("the aligned errors are not finite (poses too far apart to compare)",
+                              detail={"reason": "non_finite_errors"})
     return EvalResult(_stats(ape), rpe, ref.num_poses, np.asarray(ape.error), np.asarray(est.timestamps),
                       Trajectory(np.asarray(est.timestamps), gt_in_est))
 
