@@ -41,8 +41,8 @@ def serve_command(
     init_db(settings)  # once, before the processes start (they would each migrate otherwise)
     # name -> (command, the signal that stops it cleanly)
     commands = {
-        "api": ([sys.executable, "-m", "uvicorn", "backend.app:create_app", "--factory",
-                 "--host", settings.host, "--port", str(settings.port)], signal.SIGTERM),
+        # uvicorn with the api's header size and time limits (cli/api_server.py); host and port from env
+        "api": ([sys.executable, "-m", "cli.api_server"], signal.SIGTERM),
     }
     if worker:
         commands["worker"] = ([sys.executable, "-m", "cli.main", "worker"], signal.SIGTERM)
