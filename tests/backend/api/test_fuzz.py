@@ -6,12 +6,16 @@ seed. Each response must be no 5xx, a documented status code and content type, h
 match the spec, and invalid requests must be refused. The ids the spec's examples use are seeded (a
 sequence, a finished job with artifacts, a batch) and a stand-in viewer hub answers, so the examples
 reach the success paths, not only 404s. A second app has an API token the fuzzer never knows: every
-mutating request must be a documented 401, whatever else is wrong with it.
+mutating request must be a documented 401, whatever else is wrong with it. Everything runs on SQLite
+and on PostgreSQL (a fresh schema per app at 127.0.0.1:5432, skipped with the reason when unreachable),
+with data dirs under pytest's temp dirs: nothing is written into the repository.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import tempfile
 import threading
 from collections.abc import Iterator
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -39,6 +43,7 @@ from storage.models import Batch, JobStatus
 from storage.repositories import jobs, sequences
 from storage.settings import Settings, get_settings
 from tests.backend.api.data import write_sequence
+from tests.backend.api.pg import pg_schema_url
 
 # Per operation and mode: the file runs in well under a minute on 2 CPUs. A deeper run on demand:
 # VTD_TEST_FUZZ_EXAMPLES=500 VTD_TEST_FUZZ_SEED=7 pytest tests/backend/api/test_fuzz.py
@@ -67,7 +72,8 @@ def _config() -> schemathesis.Config:
 
 def _spec_schema(**settings: object) -> schemathesis.BaseSchema:
     """The spec of an app with ``settings``, read without serving a request (no engine, no data dir)."""
-    spec_app = create_app(get_settings(data_dir=Path("unused"), **settings), enqueue=lambda _id: None,
+    unused = Path(tempfile.gettempdir()) / "vtd-fuzz-spec-only"  # never the repo, even if something writes
+    spec_app = create_app(get_settings(data_dir=unused, **settings), enqueue=lambda _id: None,
                           session_factory=sessionmaker(), migrate=False)
     schema = schemathesis.openapi.from_dict(spec_app.openapi(), config=_config())
     schema.app = spec_app  # selects the in-process ASGI transport; each test passes its own app
@@ -126,26 +132,37 @@ def _seed(settings: Settings) -> None:
     store.write_text(_JOB_ID, "metrics.json", '{"frames": 3}')
 
 
-def _app(tmp: Path, viewer_port: int, **settings: object) -> Iterator[FastAPI]:
+def _app(tmp: Path, viewer_port: int, database: str, **settings: object) -> Iterator[FastAPI]:
+    """An app on its own temp data dir and, for PostgreSQL, its own schema (dropped afterwards)."""
     root = tmp / "imports"
     write_sequence(root / "tum" / "seq_a", n=3)
-    s = get_settings(data_dir=tmp / "data", import_root=root, viewer_port=viewer_port,
-                     max_upload_bytes=1 << 20, **settings)
-    _seed(s)
-    yield create_app(s, enqueue=lambda _id: None)
-    shutdown_lifespans()  # schemathesis keeps an app's lifespan running until told
+    with contextlib.ExitStack() as stack:
+        url = stack.enter_context(pg_schema_url()) if database == "postgresql" else None
+        s = get_settings(data_dir=tmp / "data", import_root=root, viewer_port=viewer_port,
+                         max_upload_bytes=1 << 20, database_url=url, **settings)
+        _seed(s)
+        app = create_app(s, enqueue=lambda _id: None)
+        yield app
+        shutdown_lifespans()  # schemathesis keeps an app's lifespan running until told
+        app.state.session_factory.kw["bind"].dispose()  # before the schema is dropped
 
 
 # Module scope: one app per run, its state carried from one generated request to the next (as a real
-# client's would be); hypothesis rightly refuses function-scoped fixtures inside @given.
-@pytest.fixture(scope="module")
-def open_app(tmp_path_factory: pytest.TempPathFactory, viewer_hub: int) -> Iterator[FastAPI]:
-    yield from _app(tmp_path_factory.mktemp("fuzz-open"), viewer_hub)
+# client's would be); hypothesis rightly refuses function-scoped fixtures inside @given. Both databases:
+# NUL bytes and NaN were 500s on PostgreSQL only.
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def database(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
 
 
 @pytest.fixture(scope="module")
-def secured_app(tmp_path_factory: pytest.TempPathFactory, viewer_hub: int) -> Iterator[FastAPI]:
-    yield from _app(tmp_path_factory.mktemp("fuzz-secured"), viewer_hub, api_token=TOKEN)
+def open_app(tmp_path_factory: pytest.TempPathFactory, viewer_hub: int, database: str) -> Iterator[FastAPI]:
+    yield from _app(tmp_path_factory.mktemp("fuzz-open"), viewer_hub, database)
+
+
+@pytest.fixture(scope="module")
+def secured_app(tmp_path_factory: pytest.TempPathFactory, viewer_hub: int, database: str) -> Iterator[FastAPI]:
+    yield from _app(tmp_path_factory.mktemp("fuzz-secured"), viewer_hub, database, api_token=TOKEN)
 
 
 @open_schema.exclude(method="DELETE").parametrize()
