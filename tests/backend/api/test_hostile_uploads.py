@@ -16,6 +16,7 @@ import struct
 import tarfile
 import threading
 import time
+import tracemalloc
 import warnings
 import zipfile
 import zlib
@@ -322,8 +323,14 @@ def test_hostile_upload_is_rejected_cleanly(name: str, make_client, seq_folder, 
     scratch = tmp_path / "scratch"
     scratch.mkdir()
     filename, data = case.build(scratch, seq_folder)
-    r = upload(client, data, filename=filename)
+    tracemalloc.start()  # the api runs in this process: its allocations are counted
+    try:
+        r = upload(client, data, filename=filename)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
     assert_clean_rejection(client, settings, r, case.status, case.fragment)
+    assert peak < 100 << 20, f"the api's memory grew by {peak / 1e6:.0f} MB"
     assert not Path("/tmp/vtd-evil").exists() and not (tmp_path / "x").exists()
 
 
