@@ -15,6 +15,7 @@ import time
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from itertools import chain
 from pathlib import Path
 
 import cv2
@@ -27,6 +28,7 @@ from formats.ply import write_ply
 from worker.slam.config import PipelineConfig
 from worker.slam.errors import ConfigError, EvaluationError, SlamError
 from worker.slam.geometry.se3 import inv, orthonormalize
+from worker.slam.io.read_ahead import ReadAhead
 from worker.slam.io.sequence import Sequence
 from worker.slam.io.trajectory import Trajectory, write_tum_trajectory
 from worker.slam.map.map import Map
@@ -84,8 +86,12 @@ class _Timer:
 
 def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str | None = None, *,
                  start: int = 0, max_frames: int | None = None, progress: ProgressFn | None = None,
-                 should_cancel: CancelFn | None = None, stages: list[FrameStage] | None = None) -> RunResult:
-    """Track frames [start, start+max_frames) of `sequence`; write the outputs to `out_dir` when given."""
+                 should_cancel: CancelFn | None = None, stages: list[FrameStage] | None = None,
+                 read_ahead: int = 2) -> RunResult:
+    """Track frames [start, start+max_frames) of `sequence`; write the outputs to `out_dir` when given.
+
+    `read_ahead`: frames decoded ahead on a background thread (0: read on this thread).
+    """
     if start < 0 or start >= len(sequence):
         raise ConfigError(f"start {start} is outside the sequence (0..{len(sequence) - 1})")
     stop = len(sequence) if max_frames is None else min(len(sequence), start + max(0, max_frames))
@@ -104,45 +110,49 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     timer = _Timer()
     rel: list[tuple[int, np.ndarray]] = []  # per frame: (reference keyframe, T_ref_frame)
     stamps, tracked = np.zeros(total), np.zeros(total, bool)
-    n_reloc = 0
+    n_reloc = n_new_maps = 0
     frame_info: list[dict] = []
     stage_info: dict[str, list[float]] = defaultdict(list)
     cpu_tracking: list[float] = []  # CPU seconds (all threads): comparable when the machine is shared
     t_loop = time.perf_counter()
-    for k, i in enumerate(range(start, stop)):
-        if should_cancel is not None and should_cancel():
-            raise PipelineCancelled(f"cancelled after {k} of {total} frames")
-        t = time.perf_counter()
-        frame = first if k == 0 else sequence[i]
-        t = timer("read", t)
-        inputs = FrameInputs()
-        ctx = _frame_context(run_ctx, tracker)
-        for st in stages:
-            inputs = st.process(frame, inputs, ctx)
-            t = timer(st.name, t)
-        for key, val in inputs.info.items():
-            if isinstance(val, (int, float)) and not isinstance(val, bool):
-                stage_info[key].append(float(val))
-        c0 = time.process_time()
-        if inputs.previews:
-            previews.offer(frame.index, inputs.previews)
-        res = tracker.track(frame.index, frame.timestamp, frame.rgb, frame.depth, inputs.track_inputs())
-        cpu_tracking.append(time.process_time() - c0)
-        t = timer("tracking", t)
-        if res.keyframe is not None:
-            mapper.process(res.keyframe)
-            t = timer("local_mapping", t)
-            if closer is not None:
-                closer.process(res.keyframe)
-                t = timer("loop_closure", t)
-            tracker.on_map_updated(res)
-        stamps[k], tracked[k] = frame.timestamp, res.ok
-        frame_info.append({"features": len(res.feats), "matched_points": int(np.sum(res.point_ids >= 0)),
-                           **{k2: v for k2, v in inputs.info.items() if isinstance(v, (int, float))}})
-        n_reloc += int(res.relocalised)
-        rel.append(_relative(smap, res))
-        if progress is not None:
-            progress(k + 1, total, "tracking")
+    # frames after the first are decoded on a background thread while this one runs the stages
+    with ReadAhead(sequence.__getitem__, range(start + 1, stop), read_ahead) as ahead:
+        frames = chain([first], ahead)
+        for k in range(total):
+            if should_cancel is not None and should_cancel():
+                raise PipelineCancelled(f"cancelled after {k} of {total} frames")
+            t = time.perf_counter()
+            frame = next(frames)  # with read-ahead: the wait for the reader thread, not the decoding
+            t = timer("read", t)
+            inputs = FrameInputs()
+            ctx = _frame_context(run_ctx, tracker)
+            for st in stages:
+                inputs = st.process(frame, inputs, ctx)
+                t = timer(st.name, t)
+            for key, val in inputs.info.items():
+                if isinstance(val, (int, float)) and not isinstance(val, bool):
+                    stage_info[key].append(float(val))
+            c0 = time.process_time()
+            if inputs.previews:
+                previews.offer(frame.index, inputs.previews)
+            res = tracker.track(frame.index, frame.timestamp, frame.rgb, frame.depth, inputs.track_inputs())
+            cpu_tracking.append(time.process_time() - c0)
+            t = timer("tracking", t)
+            if res.keyframe is not None:
+                mapper.process(res.keyframe)
+                t = timer("local_mapping", t)
+                if closer is not None:
+                    closer.process(res.keyframe)
+                    t = timer("loop_closure", t)
+                tracker.on_map_updated(res)
+            stamps[k], tracked[k] = frame.timestamp, res.ok
+            frame_info.append({"features": len(res.feats), "matched_points": int(np.sum(res.point_ids >= 0)),
+                               **{k2: v for k2, v in inputs.info.items() if isinstance(v, (int, float))}})
+            n_reloc += int(res.relocalised)
+            n_new_maps += int(res.new_map)
+            rel.append(_relative(smap, res))
+            if progress is not None:
+                progress(k + 1, total, "tracking")
     loop_s = time.perf_counter() - t_loop
     if config.mapping.final_global_ba:
         t = time.perf_counter()
@@ -162,7 +172,8 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
         timer("dense", t)
     metrics = {
         "frames": total, "tracked": int(tracked.sum()), "lost": int((~tracked).sum()),
-        "relocalisations": n_reloc, "keyframes": len(smap), "map_points": smap.points.n_alive,
+        "relocalisations": n_reloc, "new_maps": n_new_maps,
+        "keyframes": len(smap), "map_points": smap.points.n_alive,
         "loops": closer.n_loops if closer else 0, "loops_applied": closer.n_applied if closer else 0,
         "fps": round(total / loop_s, 2) if loop_s > 0 else None,
         "tracking_fps": round(1000.0 / np.mean(timer.ms["tracking"]), 2) if timer.ms["tracking"] else None,
