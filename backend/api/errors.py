@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -116,7 +117,7 @@ def install_error_handlers(app: FastAPI) -> None:
 
     def respond(
         request: Request, status: int, code: str, message: str, detail: Any = None,
-        headers: dict[str, str] | None = None,
+        headers: Mapping[str, str] | None = None,
     ) -> JSONResponse:
         rid = request_id_of(request.scope)
         try:
