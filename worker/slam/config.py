@@ -82,6 +82,16 @@ class TrackingConfig:
     """Recent keyframes tried by relocalisation (plus the best descriptor matches)."""
     reloc_min_inliers: int = valid(30, 4, 100_000)
     """PnP-RANSAC inliers needed to accept a relocalisation."""
+    init_min_points: int = valid(150, 4, 100_000)
+    """A map starts (first keyframe, or a new map after a loss) only on a frame whose depth gives at least
+    this many new map points: 5x `min_matches`, since culling removes many new points (ORB-SLAM2 waits for
+    500 keypoints); a start on fewer left 59 of 60 frames of a masked synthetic sequence lost."""
+    new_map_after_lost: int = valid(1, 1, 100_000)
+    """Consecutive frames that neither track nor relocalise before a new map starts at the motion model's
+    pose (constant-velocity bridge: same world frame, no shared points until a loop connects them)."""
+    reset_max_keyframes: int = valid(5, 0, 100_000)
+    """A map with at most this many keyframes that loses tracking is discarded (its points killed) when the
+    new map starts, as ORB-SLAM2 resets young maps; older maps stay for relocalisation and loop closure."""
 
 
 @dataclass

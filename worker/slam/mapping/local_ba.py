@@ -47,9 +47,11 @@ def local_bundle_adjust(slam_map: Map, local: list[int], K: np.ndarray, bf: floa
             if j not in local:
                 fixed_w[j] = fixed_w.get(j, 0) + w
     fixed = [j for j, _ in sorted(fixed_w.items(), key=lambda x: -x[1])[:max_fixed]]
-    if not fixed and 0 in local and len(local) > 1:
-        local = [i for i in local if i != 0]  # keep the first keyframe as the gauge
-        fixed = [0]
+    if not fixed and len(local) > 1:
+        # the oldest holds the gauge: keyframe 0, or a new map's first keyframe (it shares no points)
+        anchor = min(local)
+        local = [i for i in local if i != anchor]
+        fixed = [anchor]
     cams = list(local) + fixed
     n_var = len(local)
     c_idx, p_idx, kp_idx = [], [], []

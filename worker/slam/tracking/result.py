@@ -25,6 +25,8 @@ class TrackResult:
     covariance: np.ndarray | None
     ref_kf: int
     keyframe: KeyFrame | None = None
+    new_map: bool = False
+    """This (lost) frame started a new map as its first keyframe (see `recovery.LossAction`)."""
 
     @property
     def n_tracked(self) -> int:

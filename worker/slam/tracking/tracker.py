@@ -6,6 +6,12 @@ projection search against the local map (points of the keyframes covisible with 
 motion-only BA, a second finer search and BA; relocalisation against keyframes when that fails; keyframe
 decision and creation of new map points from keyframe depth. Local BA, culling and loop closure run
 afterwards on the keyframe it returns.
+
+Maps start only on frames that give `init_min_points` new points. When a frame neither tracks nor
+relocalises, `recovery.after_loss` decides: wait, or start a new map at the motion model's pose (a
+constant-velocity bridge in the same world frame, so later frames keep consistent poses), discarding the lost
+map's points first when it was young. Old maps' keyframes stay for relocalisation and loop closure, whose
+pose graph (consecutive-keyframe edges span the bridge) corrects the new map when a loop connects them.
 """
 from __future__ import annotations
 
@@ -26,10 +32,9 @@ from worker.slam.tracking.inputs import TrackInputs
 from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
 from worker.slam.tracking.motion import ConstantVelocityModel
 from worker.slam.tracking.projection import search_by_projection
+from worker.slam.tracking.recovery import LossAction, after_loss, can_start_map
 from worker.slam.tracking.relocalization import pnp_against_keyframe, relocalisation_candidates
 from worker.slam.tracking.result import TrackResult
-
-MIN_INIT_POINTS = 50
 
 
 class Tracker:
@@ -47,6 +52,8 @@ class Tracker:
         self.last_kf_frame = -1
         self.last_point_ids = np.zeros(0, np.int64)
         self.lost_streak = 0
+        #: First keyframe id of the current map (maps after a loss continue the keyframe ids).
+        self.map_start_kf = 0
         #: The last successfully tracked frame's result (the pipeline hands its pose to the stages).
         self.last_result: TrackResult | None = None
 
@@ -105,6 +112,9 @@ class Tracker:
             self.motion.reset(pred)  # keep the prediction as the last pose; forget the velocity
             res = TrackResult(index, timestamp, pred, False, False, feats, np.full(len(feats), -1, np.int64),
                               None, self.ref_kf)
+            action = after_loss(self.lost_streak, len(self.map) - self.map_start_kf, self.tc)
+            if action is not LossAction.WAIT:
+                self._start_new_map(res, rgb, dense_depth, depth, discard_old=action is LossAction.RESET)
             return res
         self.lost_streak = 0
         if relocalised:
@@ -132,13 +142,38 @@ class Tracker:
                     dense_depth: np.ndarray, measured: np.ndarray) -> TrackResult:
         T = np.eye(4)
         res = TrackResult(index, timestamp, T, False, False, feats, np.full(len(feats), -1, np.int64), None, 0)
-        if (feats.depth > 0).sum() < MIN_INIT_POINTS:
+        if not can_start_map(self._n_new_points(feats), self.tc):
             return res  # wait for a frame with enough depth
         res.ok = True
         res.keyframe = self._insert_keyframe(res, rgb, dense_depth, measured)
         self.motion.reset(T)
         self.last_result = res
         return res
+
+    def _n_new_points(self, feats: Features) -> int:
+        """Map points a keyframe on `feats` with nothing tracked would create (see `_insert_keyframe`)."""
+        z = feats.depth
+        return int(((z > 0) & (z < self.cfg.mapping.new_point_max_depth_m)).sum())
+
+    def _start_new_map(self, res: TrackResult, rgb: np.ndarray, dense_depth: np.ndarray, measured: np.ndarray,
+                       discard_old: bool) -> None:
+        """Make lost frame `res` (pose = the prediction) the first keyframe of a new map, if it can start one.
+
+        The frame itself stays `ok=False`: its pose was predicted, not measured.
+        """
+        if not can_start_map(self._n_new_points(res.feats), self.tc):
+            return
+        if discard_old:
+            p = self.map.points
+            p.kill(np.flatnonzero(p.alive[: p.n] & (p.first_kf[: p.n] >= self.map_start_kf)))
+        res.keyframe = self._insert_keyframe(res, rgb, dense_depth, measured)
+        res.ref_kf = res.keyframe.id
+        res.new_map = True
+        self.map_start_kf = res.keyframe.id
+        self.last_point_ids = np.zeros(0, np.int64)
+        self.lost_streak = 0
+        self.motion.reset(res.T_WC)
+        self.last_result = res
 
     def _local_points(self) -> np.ndarray:
         kfs = self.map.keyframes
