@@ -25,17 +25,20 @@ def settings_ranges() -> dict[str, dict[str, Any]]:
 
 
 def check_ranges(config: dict[str, Any]) -> None:
-    """Every ranged setting in ``config`` (nested or dotted overrides) has the right type and lies in its
-    range; :class:`InvalidInput` naming the field and the range otherwise."""
+    """Every setting in ``config`` (nested or dotted overrides) of a known section exists, and a ranged
+    one has the right type and lies in its range; :class:`InvalidInput` naming the field and the range."""
     ranges = settings_ranges()
     sections = {key.split(".", 1)[0] for key in ranges}
     for key, value in _flatten(config):
-        section = key.split(".", 1)[0]
-        if section not in sections:
-            continue
+        if key.split(".", 1)[0] not in sections:
+            continue  # not a settings section (name, stages) or one the worker checks itself
         spec = ranges.get(key)
         if spec is None:
-            raise InvalidInput(f"unknown config field {key!r}", {"field": key})
+            if not any(ranges.get(prefix, {}).get("type") == "dict" for prefix in _prefixes(key)):
+                raise InvalidInput(f"unknown config field {key!r}", {"field": key})
+            continue
+        if "min" not in spec:
+            continue
         lo, hi = spec["min"], spec["max"]
         detail = {"field": key, "min": lo, "max": hi, "value": value if _is_number(value) else str(value)[:64]}
         if not _is_number(value) or (spec["type"] == "int" and not float(value).is_integer()):
@@ -43,6 +46,11 @@ def check_ranges(config: dict[str, Any]) -> None:
                                f"within {lo}..{hi}", detail)
         if not lo <= value <= hi:
             raise InvalidInput(f"config {key} must be within {lo}..{hi}, got {value!r}", detail)
+
+
+def _prefixes(key: str) -> list[str]:
+    parts = key.split(".")
+    return [".".join(parts[:i]) for i in range(1, len(parts))]
 
 
 def _is_number(value: Any) -> bool:

@@ -1,7 +1,7 @@
 """The pipeline settings' valid ranges as data, for the api (which never imports the pipeline).
 
-``formats/settings_ranges.json`` is generated from the ``valid(...)`` fields of ``worker.slam.config``
-and committed; a test regenerates it and fails on any difference. Regenerate after changing a range:
+``formats/settings_ranges.json`` lists every setting (type, default) with the valid range its
+``valid(...)`` field declares, and is generated from the config dataclasses and committed; a test regenerates it and fails on any difference. Regenerate after changing a range:
 
     .venv/bin/python -m worker.slam.ranges
 """
@@ -13,31 +13,52 @@ from pathlib import Path
 from typing import Any
 
 from worker.slam.config import PipelineConfig
+from worker.slam.presets import preset_names  # noqa: F401 - registers the shipped stages' sections
 
 RANGES_FILE = Path(__file__).resolve().parents[2] / "formats" / "settings_ranges.json"
 
 
 def settings_ranges() -> dict[str, dict[str, Any]]:
-    """``{"features.n_levels": {"type": "int", "min": 1, "max": 16, "default": 8}, ...}`` for every
-    ranged field of the core sections, in declaration order."""
+    """Every setting of every section (core and the shipped stages'), nested ones dotted, in declaration
+    order: ``{"features.n_levels": {"type": "int", "default": 8, "min": 1, "max": 16}, "dense.enabled":
+    {"type": "bool", "default": true}, ...}``; ``min``/``max`` where the field declares a range."""
     cfg = PipelineConfig()
     out: dict[str, dict[str, Any]] = {}
-    for section in dataclasses.fields(cfg):
-        value = getattr(cfg, section.name)
-        if not dataclasses.is_dataclass(value):
-            continue
-        for f in dataclasses.fields(value):
-            bounds = f.metadata.get("range")
-            if bounds is None:
-                continue
-            default = getattr(value, f.name)
-            out[f"{section.name}.{f.name}"] = {
-                "type": "int" if isinstance(default, int) else "float",
-                "min": bounds[0],
-                "max": bounds[1],
-                "default": default,
-            }
+    for name in cfg.to_dict():
+        value = getattr(cfg, name, None) if name in ("name", "stages") else cfg.section(name)
+        if dataclasses.is_dataclass(value):
+            _walk(value, name, out)
     return out
+
+
+def _walk(obj: Any, prefix: str, out: dict[str, dict[str, Any]]) -> None:
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        key = f"{prefix}.{f.name}"
+        if dataclasses.is_dataclass(value):
+            _walk(value, key, out)
+            continue
+        entry: dict[str, Any] = {"type": _type_name(value), "default": _json_value(value)}
+        bounds = f.metadata.get("range")
+        if bounds is not None:
+            entry["min"], entry["max"] = bounds
+        out[key] = entry
+
+
+def _type_name(value: Any) -> str:
+    for kind, name in ((bool, "bool"), (int, "int"), (float, "float"), (str, "str"), (list | tuple, "list"),
+                       (dict, "dict")):
+        if isinstance(value, kind):
+            return name
+    return "null" if value is None else type(value).__name__
+
+
+def _json_value(value: Any) -> Any:
+    if isinstance(value, tuple):
+        return [_json_value(v) for v in value]
+    if value is None or isinstance(value, bool | int | float | str | list | dict):
+        return value
+    return str(value)
 
 
 def render() -> str:
