@@ -1,7 +1,8 @@
 """The pipeline settings' valid ranges as data, for the api (which never imports the pipeline).
 
 ``formats/settings_ranges.json`` lists every setting (type, default) with the valid range its
-``valid(...)`` field declares, and is generated from the config dataclasses and committed; a test regenerates it and fails on any difference. Regenerate after changing a range:
+``valid(...)`` field declares, and is generated from the config dataclasses and committed; a test
+regenerates it and fails on any difference. Regenerate after changing a config dataclass:
 
     .venv/bin/python -m worker.slam.ranges
 """
