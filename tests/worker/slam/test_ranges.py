@@ -40,10 +40,12 @@ def test_worker_and_api_refuse_the_same_out_of_range_values(key: str) -> None:
             PipelineConfig().with_overrides({key: bad})
         with pytest.raises(InvalidInput, match=key.replace(".", r"\.")):
             check_ranges({key: bad})
-    for good in (spec["min"], spec["max"]):
+    for good in (spec["min"], spec["max"]):  # each bound alone (a field may also be checked against others)
         check_ranges({key: good})
-        section, name = key.split(".", 1)
-    assert PipelineConfig().with_overrides({key: good}).to_dict()[section][name] == good
+        value = PipelineConfig().with_overrides({key: good}).to_dict()
+    for part in key.split("."):
+        value = value[part]
+    assert value == good
 
 
 def _run(seq: Path, out: Path, config: str) -> subprocess.CompletedProcess[str]:

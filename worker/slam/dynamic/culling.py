@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from worker.slam.config import valid
 from worker.slam.dynamic.epipolar import (
     Matches,
     epipolar_distance,
@@ -42,23 +43,23 @@ class CullingConfig:
     """With segmentation, also flag moving clusters no segment covers (the geometry-only path always does).
     Off by default: on synthetic truth the cluster path finds few moving points (features on walking people
     rarely match across frames) and removes static ones too."""
-    ransac_px: float = 1.0
+    ransac_px: float = valid(1.0, 0.01, 100.0)
     """RANSAC inlier threshold of the fundamental matrix (pixels)."""
-    fit_max_points: int = 200
+    fit_max_points: int = valid(200, 8, 100_000)
     """The depth test's pose is fitted on at most this many static matches (evenly picked): with mostly
     inliers more points make RANSAC slower, not the pose better; every match is then scored. (F keeps all
     static matches: on a nearly planar static scene a subset left it ill-determined in the tests.)"""
-    match_max_distance: int = 50
+    match_max_distance: int = valid(50, 0, 256)
     """Hamming distance above which ORB matches are dropped."""
-    guided_radius_px: float = 24.0
+    guided_radius_px: float = valid(24.0, 0.5, 1000.0)
     """Search radius around a keypoint's predicted position when the relative pose is predicted (doubled for
     keypoints without depth). Wide enough for the prediction error and for people moving ~10 px per frame."""
-    object_margin_px: float = 64.0
+    object_margin_px: float = valid(64.0, 0.0, 4096.0)
     """Previous keypoints are brute-force matched to the objects' keypoints when their predicted position
     falls within this margin of the objects' bounding box (the object's own motion over `lag_frames`)."""
-    guided_min_matches: int = 40
+    guided_min_matches: int = valid(40, 0, 100_000)
     """Fewer guided matches than this (a bad prediction) → brute-force cross-checked matching instead."""
-    prefer_static_within: int = 20
+    prefer_static_within: int = valid(20, 0, 256)
     """An object keypoint's brute-force match gives way to its guided match (a previous keypoint near where the
     prediction puts it if static) when that one's Hamming distance is at most this much larger (-1 = never):
     exhaustive matching picks the best descriptor anywhere near the objects, on repeated texture (kitchen
@@ -71,12 +72,12 @@ class CullingConfig:
     outside, is least reliable (README, "The prediction under masks that cover the view")."""
     use_depth: bool = True
     """Add the reprojection test with the previous frame's depth."""
-    pnp_px: float = 2.0
+    pnp_px: float = valid(2.0, 0.01, 100.0)
     """RANSAC threshold of the depth test's PnP; wider lets a wrong motion explain a moving object too."""
-    refine_min_inliers: float = 0.5
+    refine_min_inliers: float = valid(0.5, 0.0, 1.0)
     """With a predicted pose, the depth test refines it (no RANSAC) when at least this fraction of the static
     points agree with it, else falls back to PnP-RANSAC."""
-    reprojection_scale: float = 3.0
+    reprojection_scale: float = valid(3.0, 0.01, 100.0)
     """A reprojection error counts as `error / scale` epipolar pixels (depth noise is larger than keypoint noise)."""
     prediction_veto: bool = True
     """With a predicted relative pose that guided matching confirmed, a point's score is at most its
@@ -86,7 +87,7 @@ class CullingConfig:
     the person; the whole static scene then looks moving and tracking is lost. Where segmentation is right the
     veto can only keep slow movers, so it trades a little there for not losing whole sequences (README,
     "Prediction veto")."""
-    refine_prediction_below: float = 0.2
+    refine_prediction_below: float = valid(0.2, 0.0, 1.0)
     """When fewer than this fraction of the matches lie outside the segments, the prediction veto uses the
     predicted pose refined on all matched points (`_refine_from`: LM from the prediction on the points it
     explains, gates of 3 and 1 x `pnp_px`; a wide first gate let a mover pull the pose along) instead of the raw
@@ -94,44 +95,44 @@ class CullingConfig:
     are weak and the veto decides, and a prediction a few pixels off makes the whole static view look moving.
     Not always: an exact pose lets the veto keep slow movers (README, "The prediction under masks that cover
     the view")."""
-    min_points: int = 3
+    min_points: int = valid(3, 1, 100_000)
     """A segment needs this many matched points to be judged by geometry."""
     undecided_dynamic: bool = True
     """A potentially dynamic segment with too few matched points to judge is treated as dynamic (safe side:
     a person's features rarely match across frames when they walk)."""
-    segment_quantile: float = 0.5
+    segment_quantile: float = valid(0.5, 0.0, 1.0)
     """A segment is dynamic when this quantile of its points' scores exceeds Δd (robust to a few bad matches)."""
-    min_segment_area: int = 200
-    depth_jump: float = 0.05
+    min_segment_area: int = valid(200, 0, 10_000_000)
+    depth_jump: float = valid(0.05, 0.0, 10.0)
     """Relative depth jump that separates two segments."""
-    cluster_cell: int = 24
+    cluster_cell: int = valid(24, 1, 1_024)
     """Grid cell (pixels) for clustering moving points in the geometry path."""
-    cluster_min_points: int = 4
-    cluster_depth_tol: float = 0.25
+    cluster_min_points: int = valid(4, 1, 100_000)
+    cluster_depth_tol: float = valid(0.25, 0.0, 100.0)
     """Pixels within this (relative) depth of a cluster's median depth belong to the moving region."""
-    grow_px: int = 0
+    grow_px: int = valid(0, 0, 256)
     """A dynamic segment is extended by up to this many pixels along its own surface (depth), to cover what
     segmentation missed (0 = off); see `segments.grow_by_depth`. Off: it lifts recall with MSNET, but where
     MSNET marks most of the view it spreads the false positives along the floor and tracking is lost (README,
     "Tried and not on")."""
-    grow_rel_depth: float = 0.15
+    grow_rel_depth: float = valid(0.15, 0.0, 10.0)
     """Relative depth tolerance of that growth around the segment's median depth."""
-    local_px: float = 48.0
+    local_px: float = valid(48.0, 1.0, 4096.0)
     """Dynamic segments larger than `local_min_area` are also judged locally: a pixel whose `local_k` nearest
     matched points of the segment all lie within this distance and mostly agree with the static scene is kept.
     A segmentation blob that spills from a walking person onto the static table beside them, at the same
     depth, is then removed only where it moves. 0 = off."""
-    local_min_area: float = 0.05
+    local_min_area: float = valid(0.05, 0.0, 1.0)
     """Fraction of the image above which a segment is judged locally."""
-    local_k: int = 5
-    local_step_px: int = 8
+    local_k: int = valid(5, 1, 1_000)
+    local_step_px: int = valid(8, 1, 1_024)
     """Local decisions are made on a grid of this spacing and spread to its cells."""
-    dilation_px: int = 3
+    dilation_px: int = valid(3, 0, 256)
     """The exclude mask is the dynamic mask dilated by this many pixels (a keypoint on the silhouette describes a
     patch that moves with the object). With true masks a band of half the ORB patch is best, but MSNET's masks
     already spill past people and a wider band starves tracking, hence the narrow default. Use 15 with a precise
     segmenter (README, the exclusion-band table)."""
-    cluster_dilation_px: int = 3
+    cluster_dilation_px: int = valid(3, 0, 256)
     """The same for the geometric clusters, whose regions are already whole grid cells wide (a wider band
     there removed static features and cost `geometry-only` accuracy on static 7-Scenes)."""
 

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from worker.slam.camera import Camera
-from worker.slam.config import PipelineConfig
+from worker.slam.config import PipelineConfig, valid
 from worker.slam.dynamic.culling import CullingConfig, CullingResult, cull_frame, dilate_disc, mask_at
 from worker.slam.errors import SequenceFormatError
 from worker.slam.features.types import Features
@@ -45,11 +45,11 @@ class CullingStageConfig:
     """Dynamic culling against the previous frame."""
 
     culling: CullingConfig = field(default_factory=CullingConfig)
-    lag_frames: int = 10
+    lag_frames: int = valid(10, 1, 1_000)
     """Compare with the frame this many frames back (the previous one at the start). Slow movers are the hard
     case: between consecutive frames a walking person's points move barely more than static points' noise, so
     a longer baseline separates them."""
-    min_kept_features: int = 0
+    min_kept_features: int = valid(0, 0, 100_000)
     """When culling would leave the tracker fewer features than this, keypoints in the exclusion band (near,
     not on, dynamic objects) are given back in the extractor's order (counted as `features_readmitted`). It
     rescues a wide band (`dilation_px` 15); with the narrow default band it was mixed and hurt `geometry-only`,

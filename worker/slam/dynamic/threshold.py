@@ -18,18 +18,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from worker.slam.config import valid
+
 
 @dataclass(frozen=True)
 class ThresholdConfig:
     """Parameters of f(H)."""
 
-    d_min: float = 1.5
+    d_min: float = valid(1.5, 0.0, 100.0)
     """Lower bound of Δd in pixels (sub-pixel noise of ORB keypoints stays below it)."""
-    d_max: float = 4.0
+    d_max: float = valid(4.0, 0.0, 100.0)
     """Upper bound of Δd in pixels."""
-    h0: float = -33.0
+    h0: float = valid(-33.0, -1000.0, 1000.0)
     """Entropy (nats) at the midpoint; about the entropy of a pose with ~1 mm / 0.05° standard deviations."""
-    scale: float = 4.0
+    scale: float = valid(4.0, 0.001, 1000.0)
     """Width of the transition in nats: f changes slowly with H."""
     fixed: float | None = None
     """A fixed threshold instead (for the ablation); None = adaptive."""

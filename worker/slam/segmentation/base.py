@@ -14,6 +14,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from worker.slam.config import valid
 from worker.slam.errors import ConfigError, SlamError
 
 
@@ -79,12 +80,12 @@ class SegmenterConfig:
     """Also return per-class probabilities at full resolution (costs a resize per class)."""
     dynamic_classes: tuple[str, ...] | None = None
     """Override the backend's potentially dynamic classes; None keeps its default (person, chair)."""
-    guided_radius: int = 0
+    guided_radius: int = valid(0, 0, 64)
     """msnet: upsample the network's probabilities with a fast guided filter (grey image as guide) of this
     radius, in pixels of its output grid (13 ≈ 32 px at 640x480); 0 = plain bilinear upsampling. Off: the
     masks' borders follow image edges and segmentation scores improve a little, but SLAM gets worse (see
     weights/MODEL_CARD.md, "Guided upsampling")."""
-    guided_eps: float = 0.01
+    guided_eps: float = valid(0.01, 1e-06, 10.0)
     """msnet: the guided filter's edge sensitivity (variance of grey levels in [0, 1]); larger = smoother."""
 
     def __post_init__(self) -> None:
