@@ -26,6 +26,10 @@ class ReferenceSelectionConfig:
     candidate_stride: int = 2
     """Only every n-th frame of the window is a candidate: neighbours see nearly the same background, and the
     information test (a brute-force match per candidate) dominated the stage's time at stride 1."""
+    both_sides: bool = True
+    """Offline: alternate the best past and the best future frame. A person walking across the view uncovers
+    one side of the hole in earlier frames and the other side in later ones, so a past + future pair sees more
+    of the hole than the two best-scored frames of one side."""
     max_target_descriptors: int = 256
     """The information test matches at most this many of the target's descriptors (evenly picked): the
     matched fraction is an estimate, and the cost grows with target × candidate descriptors."""
@@ -90,5 +94,17 @@ def select_references(target: Candidate, candidates: list[Candidate],
     scored.sort(key=lambda s: (s[0], s[1]), reverse=True)
     passing = [s for s in scored if s[0]]
     relaxed = len(passing) < config.min_refs
-    chosen = (scored if relaxed else passing)[: config.max_refs]
+    pool = scored if relaxed else passing
+    if not config.online and config.both_sides:
+        pool = _alternate([s for s in pool if s[2] < target.index], [s for s in pool if s[2] > target.index])
+    chosen = pool[: config.max_refs]
     return Selection([s[2] for s in chosen], {s[2]: s[3] for s in chosen}, relaxed)
+
+
+def _alternate(a: list, b: list) -> list:
+    """Interleave two best-first lists, starting with the better head: [a0, b0, a1, b1, ...] + the rest."""
+    if b and (not a or (b[0][0], b[0][1]) > (a[0][0], a[0][1])):
+        a, b = b, a
+    out = [x for pair in zip(a, b) for x in pair]
+    n = min(len(a), len(b))
+    return out + a[n:] + b[n:]

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from worker.slam.config import valid
+from worker.slam.inpainting.depth_fill import fill_depth_from_border
 from worker.slam.inpainting.patchmatch import PatchMatchConfig, patchmatch_fill
 from worker.slam.inpainting.warp import depth_in_target, forward_warp, relative_pose, sample_reference
 
@@ -34,6 +36,8 @@ class RestorationConfig:
     def __post_init__(self) -> None:
         if self.unseen_fill not in ("patchmatch", "telea"):
             raise ValueError(f"unseen_fill must be 'patchmatch' or 'telea', not {self.unseen_fill!r}")
+        if self.unseen_depth not in ("border", "none"):
+            raise ValueError(f"unseen_depth must be 'border' or 'none', not {self.unseen_depth!r}")
     max_depth_cost: float = 0.002
     """Matches whose patch cost (mean squared colour error, colours in [0, 1]) exceeds this give no depth."""
     subpixel: bool = True
@@ -43,6 +47,12 @@ class RestorationConfig:
     """Give depth to pixels PatchMatch found by appearance alone (no geometric support). Off: on synthetic truth
     their depth is typically wrong by centimetres to decimetres (look-alike textures elsewhere), so they stay
     invalid."""
+    unseen_depth: str = "border"
+    """Depth of hole pixels that get none from a reference: "border" continues the surrounding surfaces
+    (inverse depth carried in from the hole's border, `depth_fill`), "none" leaves them invalid."""
+    border_depth_confidence: float = valid(0.25, 0.0, 1.0)
+    """Confidence of border-continued depth: below the restored-feature threshold, since a crease or an
+    object hidden entirely inside the hole is guessed, not seen."""
     geometry_first: bool = True
     """Hole pixels a reference sees through geometry take that pixel directly and become context; PatchMatch
     searches only the rest: on synthetic truth free PatchMatch over geometry-initialised pixels drifted to
@@ -142,6 +152,13 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
     out_depth[py, px] = np.where(ok, d, 0.0)
     confidence = np.zeros((h, w), np.float32)
     confidence[py, px] = np.where(ok, conf, 0.0)
+    if config.unseen_depth == "border" and not ok.all():
+        guess = np.zeros_like(hole)
+        guess[py[~ok], px[~ok]] = True
+        z = fill_depth_from_border(out_depth, guess)
+        gy, gx = np.nonzero(guess)
+        out_depth[gy, gx] = z
+        confidence[gy, gx] = np.where(z > 0, np.float32(config.border_depth_confidence), 0.0)
     n = max(len(py), 1)
     from_self = float(np.sum(src_all == self_index)) / n
     seen = np.zeros_like(hole)

@@ -1,14 +1,17 @@
-"""Pipeline stage: restore the background behind culled objects from recent frames, then find features there.
+"""Pipeline stage: restore the background behind culled objects from neighbouring frames, then find features there.
 
-Online: references come from the last `window` frames, whose poses the tracker has already estimated; the
-target's own pose is the motion model's prediction (PatchMatch absorbs its small error). The restored RGB and
+References (`references`): "causal" takes them from the last `window` frames, whose poses the tracker has
+already estimated and whose moving pixels culling has marked (streaming input has nothing else); "both-sided"
+(a job's uploaded sequence) adds the next `window` frames, read ahead through the sequence, with pose and moving
+pixels estimated against the target by geometry (`lookahead`). The target's own pose is the motion model's
+prediction (geometry-first copying and PatchMatch absorb its small error). The restored RGB and
 depth replace the raw frame for keypoint depth and the dense map, and ORB keypoints found in the restored region
 (strong response, confident depth, seen by a reference) are handed to the tracker as extra features.
 """
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -16,6 +19,7 @@ import numpy as np
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig
 from worker.slam.features.types import Features
+from worker.slam.inpainting.lookahead import LookaheadConfig, moving_pixels, relative_pose_pnp
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
 from worker.slam.inpainting.restore import ReferenceView, Restoration, RestorationConfig, restore_frame
 from worker.slam.io.sequence import Frame
@@ -27,7 +31,11 @@ from worker.slam.truth import restoration_psnr
 class RestorationStageConfig:
     """Background restoration inside the live pipeline."""
 
-    references: ReferenceSelectionConfig = field(default_factory=ReferenceSelectionConfig)
+    references: str = "both-sided"
+    """Where reference frames come from: "both-sided" (the `window` frames before and after the target; for
+    jobs, which have the whole sequence) or "causal" (only the frames before; for streaming input)."""
+    selection: ReferenceSelectionConfig = field(default_factory=ReferenceSelectionConfig)
+    lookahead: LookaheadConfig = field(default_factory=LookaheadConfig)
     restoration: RestorationConfig = field(default_factory=RestorationConfig)
     restored_features: bool = False
     """Extract ORB keypoints in restored regions and give them to the tracker. Off by default: they raise ATE
@@ -41,6 +49,10 @@ class RestorationStageConfig:
     """Holes smaller than this fraction of the image are not worth restoring."""
     previews: int = 6
     """Frames whose raw / mask / restored images are kept as preview artifacts."""
+
+    def __post_init__(self) -> None:
+        if self.references not in ("causal", "both-sided"):
+            raise ValueError(f"references must be 'causal' or 'both-sided', not {self.references!r}")
 
 
 @dataclass
@@ -59,7 +71,10 @@ class RestorationStage:
     def __init__(self, config: PipelineConfig, camera: Camera) -> None:
         self.cfg: RestorationStageConfig = config.section("restoration")
         self.camera = camera
-        self.past: deque[_Past] = deque(maxlen=self.cfg.references.window)
+        self.past: deque[_Past] = deque(maxlen=self.cfg.selection.window)
+        self.ahead: dict[int, tuple[Frame, Features]] = {}
+        """Future frames read for both-sided references, with their ORB features, by index."""
+        self.future_refs = 0
         self.psnr: list[float] = []
         self.depth_err: list[float] = []
         self.restored_frames = 0
@@ -88,12 +103,28 @@ class RestorationStage:
         T_pred = ctx.T_WC_pred
         if T_pred is None:  # before the first tracked frame there is no pose to warp into
             return
-        posed = [(p, p.T_WC) for p in self.past if p.T_WC is not None]
-        sel = select_references(Candidate(frame.index, T_pred, desc),
-                                [Candidate(p.index, T_WC, p.desc) for p, T_WC in posed], self.cfg.references)
+        both = self.cfg.references == "both-sided"
+        views: dict[int, ReferenceView] = {}
+        cands: list[Candidate] = []
+        for p in self.past:
+            if p.T_WC is not None:
+                views[p.index] = ReferenceView(p.rgb, p.depth, p.T_WC, p.dynamic)
+                cands.append(Candidate(p.index, p.T_WC, p.desc))
+        future: dict[int, tuple[Frame, np.ndarray]] = {}
+        if both and inputs.features is not None:
+            future = self._future_poses(frame, hole, inputs.features, T_pred, ctx)
+            cands += [Candidate(j, T_WC, self.ahead[j][1].desc) for j, (_, T_WC) in future.items()]
+        sel_cfg = replace(self.cfg.selection, online=not both)
+        sel = select_references(Candidate(frame.index, T_pred, desc), cands, sel_cfg)
         self.relaxed += int(sel.relaxed)
-        by_index = {p.index: (p, T_WC) for p, T_WC in posed}
-        refs = [ReferenceView(p.rgb, p.depth, T_WC, p.dynamic) for p, T_WC in (by_index[i] for i in sel.indices)]
+        for j in sel.indices:
+            if j in future:  # moving pixels only for the chosen: the test costs a full-image warp
+                f, T_WC = future[j]
+                T_ft = np.linalg.inv(T_WC) @ T_pred
+                dyn = moving_pixels(f.depth, T_ft, frame.depth, hole, self.camera.K, self.cfg.lookahead)
+                views[j] = ReferenceView(f.rgb, f.depth, T_WC, dyn)
+                self.future_refs += 1
+        refs = [views[i] for i in sel.indices]
         out = restore_frame(frame.rgb, frame.depth, hole, T_pred, refs, self.camera.K, self.cfg.restoration)
         inputs.restored_rgb, inputs.restored_depth = out.rgb, out.depth
         self.restored_frames += 1
@@ -113,6 +144,29 @@ class RestorationStage:
             if ok.any():
                 self.depth_err.append(float(np.median(np.abs(out.depth[ok] - bg[ok]))))
 
+    def _future_poses(self, frame: Frame, hole: np.ndarray, own: Features, T_pred: np.ndarray,
+                      ctx: StageContext) -> dict[int, tuple[Frame, np.ndarray]]:
+        """Candidate future frames (every `candidate_stride`-th of the next `window`) with their T_WC (4,4),
+        estimated by PnP against the target at its predicted pose; frames PnP cannot place are left out."""
+        seq = ctx.sequence
+        if seq is None:
+            raise ValueError("both-sided restoration reads frames ahead and needs the run's sequence")
+        sel = self.cfg.selection
+        last = min(frame.index + sel.window, len(seq) - 1)
+        wanted = range(frame.index + sel.candidate_stride, last + 1, sel.candidate_stride)
+        self.ahead = {j: v for j, v in self.ahead.items() if j in wanted}
+        out: dict[int, tuple[Frame, np.ndarray]] = {}
+        for j in wanted:
+            if j not in self.ahead:
+                f = seq[j]
+                gray = cv2.cvtColor(f.rgb, cv2.COLOR_RGB2GRAY)
+                self.ahead[j] = (f, ctx.extractor.extract(gray, f.depth))
+            f, feats = self.ahead[j]
+            est = relative_pose_pnp(own, ~hole, feats, self.camera.K, self.cfg.lookahead)
+            if est is not None:
+                out[j] = (f, T_pred @ np.linalg.inv(est[0]))
+        return out
+
     def _restored_features(self, out: Restoration, hole: np.ndarray, own: Features | None,
                            ctx: StageContext) -> Features:
         region = cv2.dilate(hole.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
@@ -129,8 +183,9 @@ class RestorationStage:
         return feats.select(keep)
 
     def summary(self) -> dict:
-        out: dict = {"restored_frames": self.restored_frames, "restored_features": self.extra,
-               "relaxed_reference_choices": self.relaxed}
+        out: dict = {"references": self.cfg.references, "restored_frames": self.restored_frames,
+                     "future_references": self.future_refs, "restored_features": self.extra,
+                     "relaxed_reference_choices": self.relaxed}
         if self.psnr:
             out["truth"] = {"restoration_psnr": float(np.mean(self.psnr)),
                             "restoration_depth_median_m": float(np.median(self.depth_err)) if self.depth_err

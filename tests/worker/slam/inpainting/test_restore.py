@@ -6,6 +6,7 @@ from tests.worker.slam.inpainting.scene import H, K, W, pose, render, texture
 from worker.slam.inpainting.patchmatch import patchmatch_fill
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
 from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, restore_frame
+from worker.slam.inpainting.stage import RestorationStageConfig
 from worker.slam.inpainting.warp import depth_in_target, forward_warp, relative_pose
 
 
@@ -93,7 +94,26 @@ def test_no_references_falls_back_to_target_itself():
     hole = person_hole(frac_w=0.05, frac_h=0.1)
     out = restore_frame(rgb, depth, hole, pose(0.0), [], K)
     assert out.from_self == 1.0 and out.from_geometry == 0.0
-    assert np.all(out.depth[hole] == 0)  # no reference: depth stays invalid rather than guessed
+    none = restore_frame(rgb, depth, hole, pose(0.0), [], K, RestorationConfig(unseen_depth="none"))
+    assert np.all(none.depth[hole] == 0) and np.all(none.depth_confidence[hole] == 0)
+
+
+def test_depth_no_reference_sees_continues_the_surfaces_around_the_hole():
+    """A tilted plane (depth varies across the hole) is continued into it; the guess is marked as such."""
+    tex = texture(4)
+    T = pose(0.0, 0.0, 25.0)  # the wall seen at 25 degrees: depth changes by decimetres across the hole
+    rgb, depth = render(T, tex)
+    hole = person_hole()
+    person = np.where(hole, np.float32(1.0), depth)  # the occluder's own depth inside the hole
+    out = restore_frame(rgb, person, hole, T, [], K)
+    assert np.ptp(depth[hole]) > 0.2
+    assert np.all(out.depth[hole] > 0)
+    assert np.median(np.abs(out.depth[hole] - depth[hole])) < 0.01
+    assert np.percentile(np.abs(out.depth[hole] - depth[hole]), 95) < 0.03
+    cfg = RestorationConfig()
+    assert np.allclose(out.depth_confidence[hole], cfg.border_depth_confidence)
+    assert cfg.border_depth_confidence < RestorationStageConfig().min_depth_confidence  # no restored features
+    assert np.array_equal(out.depth[~hole], person[~hole])
 
 
 def test_unseen_pixels_by_diffusion_keep_geometry_and_invent_no_corners():
@@ -111,7 +131,7 @@ def test_unseen_pixels_by_diffusion_keep_geometry_and_invent_no_corners():
     assert 0.2 < seen.sum() / hole.sum() < 0.8
     assert np.array_equal(telea.rgb[seen], pm.rgb[seen])  # geometry decides where a reference sees
     unseen = hole & ~seen
-    assert np.all(telea.depth[unseen] == 0) and np.all(telea.depth_confidence[unseen] == 0)
+    assert np.all(telea.depth_confidence[unseen] < telea.depth_confidence[seen].min())  # guessed, not seen
     inner = cv2.erode(unseen.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
 
     def corners_inside(img):
