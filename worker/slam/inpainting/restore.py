@@ -53,6 +53,9 @@ class RestorationConfig:
     border_depth_confidence: float = valid(0.25, 0.0, 1.0)
     """Confidence of border-continued depth: below the restored-feature threshold, since a crease or an
     object hidden entirely inside the hole is guessed, not seen."""
+    colour_gain: bool = True
+    """Scale each reference's copied colours by its per-channel gain to the target, measured on the static
+    pixels around the hole that the reference sees too: real cameras change exposure between frames."""
     geometry_first: bool = True
     """Hole pixels a reference sees through geometry take that pixel directly and become context; PatchMatch
     searches only the rest: on synthetic truth free PatchMatch over geometry-initialised pixels drifted to
@@ -95,12 +98,15 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
         return Restoration(rgb.copy(), depth.copy(), np.zeros((h, w), np.float32), hole, hole.copy(), 0.0, 0.0)
     py, px = np.nonzero(hole)
     region = (int(py.min()), int(py.max()) + 1, int(px.min()), int(px.max()) + 1)
-    sources, valid, rel = [], [], []
+    sources, valid, rel, gains = [], [], [], []
     init_src = np.full(len(py), -1, np.int64)
     init_yx = np.full((len(py), 2), -1, np.int64)
     for s, ref in enumerate(refs):
         rel.append(relative_pose(ref.T_WC, T_WC))
-        landed = forward_warp(ref.depth, ~ref.dynamic, rel[-1], K, region)[py - region[0], px - region[2]]
+        landed_region = forward_warp(ref.depth, ~ref.dynamic, rel[-1], K, region)
+        landed = landed_region[py - region[0], px - region[2]]
+        gains.append(_colour_gain(rgb, hole, ref.rgb, landed_region, region) if config.colour_gain
+                     else np.ones(3))
         hit = (landed[:, 0] >= 0) & (init_src < 0)  # earlier (better) references first
         init_src[hit] = s
         init_yx[hit] = landed[hit]
@@ -118,11 +124,12 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
     if config.geometry_first and geo.any():
         for s, ref in enumerate(refs):
             sel = np.flatnonzero(geo & (init_src == s))
-            out_rgb[py[sel], px[sel]] = ref.rgb[init_yx[sel, 0], init_yx[sel, 1]]
+            col = ref.rgb[init_yx[sel, 0], init_yx[sel, 1]]
             if config.subpixel:
                 z = depth_in_target(ref.depth, init_yx[sel], rel[s], K)
-                col, ok = sample_reference(ref.rgb, ~ref.dynamic, np.stack([py[sel], px[sel]], 1), z, rel[s], K)
-                out_rgb[py[sel[ok]], px[sel[ok]]] = col[ok]
+                sub, ok = sample_reference(ref.rgb, ~ref.dynamic, np.stack([py[sel], px[sel]], 1), z, rel[s], K)
+                col = np.where(ok[:, None], sub, col)
+            out_rgb[py[sel], px[sel]] = np.clip(col * gains[s] + 0.5, 0, 255).astype(np.uint8)
     search = ~geo if config.geometry_first else np.ones(len(py), bool)
     if search.any() and config.unseen_fill == "telea":
         # on the fill's bounding box (+ the inpainting radius): the same result without whole-image passes
@@ -164,3 +171,17 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
     seen = np.zeros_like(hole)
     seen[py[geo], px[geo]] = True
     return Restoration(out_rgb, out_depth, confidence, hole, seen, 1.0 - from_self if refs else 0.0, from_self)
+
+
+def _colour_gain(rgb: np.ndarray, hole: np.ndarray, ref_rgb: np.ndarray, landed: np.ndarray,
+                 region: tuple[int, int, int, int], min_pixels: int = 500) -> np.ndarray:
+    """(3,) target / reference colour ratio over the static target pixels of `region` that the reference's
+    `landed` (h, w, 2) map covers; 1 where too few are shared to say. Clipped to a plausible exposure change."""
+    y0, y1, x0, x1 = region
+    shared = ~hole[y0:y1, x0:x1] & (landed[..., 0] >= 0)
+    if shared.sum() < min_pixels:
+        return np.ones(3)
+    t = rgb[y0:y1, x0:x1][shared].astype(np.float64).sum(0)
+    r = ref_rgb[landed[shared][:, 0], landed[shared][:, 1]].astype(np.float64).sum(0)
+    return np.clip((t + 1.0) / (r + 1.0), 0.7, 1.4)
+

@@ -184,3 +184,17 @@ def test_a_bad_unseen_fill_is_a_config_error():
         get_preset("full", {"restoration.restoration.unseen_fill": "magic"})
     assert get_preset("full", {"restoration.restoration.unseen_fill": "patchmatch"}) \
         .section("restoration").restoration.unseen_fill == "patchmatch"
+
+
+def test_reference_exposure_is_matched_to_the_target():
+    """A reference taken at a different exposure (all colours x 0.8) is scaled back on the hole's surroundings."""
+    tex = texture(6)
+    rgb, depth = render(pose(0.0), tex)
+    r_rgb, r_depth = render(pose(0.05), tex)
+    dark = (r_rgb * 0.8).astype(np.uint8)
+    hole = person_hole()
+    ref = ReferenceView(dark, r_depth, pose(0.05), np.zeros((H, W), bool))
+    matched = restore_frame(rgb, depth, hole, pose(0.0), [ref], K)
+    raw = restore_frame(rgb, depth, hole, pose(0.0), [ref], K, RestorationConfig(colour_gain=False))
+    assert psnr(matched.rgb, rgb, hole) > psnr(raw.rgb, rgb, hole) + 6
+    assert psnr(matched.rgb, rgb, hole) > 28
