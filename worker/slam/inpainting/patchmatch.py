@@ -16,23 +16,25 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from worker.slam.config import valid
+
 
 @dataclass(frozen=True)
 class PatchMatchConfig:
     """Parameters of the PatchMatch search."""
 
-    patch_radius: int = 2
+    patch_radius: int = valid(2, 1, 10)
     """Patches are (2r+1)^2 pixels."""
-    iterations: int = 3
+    iterations: int = valid(3, 1, 20)
     """Scan + vote rounds (the paper uses about 3)."""
-    hole_weight: float = 0.5
+    hole_weight: float = valid(0.5, 0.0, 1.0)
     """Weight of still-estimated hole pixels in the patch distance, relative to known pixels."""
-    min_valid: float = 0.5
+    min_valid: float = valid(0.5, 0.0, 1.0)
     """A source patch needs a valid centre and at least this fraction (by weight) of valid pixels."""
-    init_search_radius: int = 16
+    init_search_radius: int = valid(16, 1, 10_000)
     """Random search of pixels that start from a given match (e.g. geometry) begins at this radius instead of
     the image size: the match is already close, and the wide radii would only cost time."""
-    seed: int = 0
+    seed: int = valid(0, 0, 2**31 - 1)
 
 
 @dataclass(frozen=True)

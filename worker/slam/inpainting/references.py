@@ -6,31 +6,33 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from worker.slam.config import valid
+
 
 @dataclass(frozen=True)
 class ReferenceSelectionConfig:
     """How the reference library of a target frame is chosen."""
 
-    window: int = 15
+    window: int = valid(15, 1, 1_000)
     """Candidates are the frames up to `window` before (and, offline, after) the target."""
     online: bool = True
     """Online: past frames only (the live pipeline). Offline: both sides."""
-    min_match_ratio: float = 0.15
+    min_match_ratio: float = valid(0.15, 0.0, 1.0)
     """Information test: ORB matches with the target / target's features."""
-    min_translation_m: float = 0.01
+    min_translation_m: float = valid(0.01, 0.0001, 10.0)
     """Motion test τ: camera displacement to the target."""
-    min_rotation_deg: float = 0.5
+    min_rotation_deg: float = valid(0.5, 0.0, 180.0)
     """Motion test γ: camera rotation to the target."""
-    min_refs: int = 2
-    max_refs: int = 4
-    candidate_stride: int = 2
+    min_refs: int = valid(2, 1, 16)
+    max_refs: int = valid(4, 1, 16)
+    candidate_stride: int = valid(2, 1, 100)
     """Only every n-th frame of the window is a candidate: neighbours see nearly the same background, and the
     information test (a brute-force match per candidate) dominated the stage's time at stride 1."""
     both_sides: bool = True
     """Offline: alternate the best past and the best future frame. A person walking across the view uncovers
     one side of the hole in earlier frames and the other side in later ones, so a past + future pair sees more
     of the hole than the two best-scored frames of one side."""
-    max_target_descriptors: int = 256
+    max_target_descriptors: int = valid(256, 8, 100_000)
     """The information test matches at most this many of the target's descriptors (evenly picked): the
     matched fraction is an estimate, and the cost grows with target × candidate descriptors."""
 

@@ -38,7 +38,7 @@ class RestorationConfig:
             raise ValueError(f"unseen_fill must be 'patchmatch' or 'telea', not {self.unseen_fill!r}")
         if self.unseen_depth not in ("border", "none"):
             raise ValueError(f"unseen_depth must be 'border' or 'none', not {self.unseen_depth!r}")
-    max_depth_cost: float = 0.002
+    max_depth_cost: float = valid(0.002, 1e-6, 3.0)
     """Matches whose patch cost (mean squared colour error, colours in [0, 1]) exceeds this give no depth."""
     subpixel: bool = True
     """Geometry-seen pixels take the reference colour at the exact sub-pixel point (bilinear) instead of the

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from worker.slam.camera import Camera
-from worker.slam.config import PipelineConfig
+from worker.slam.config import PipelineConfig, valid
 from worker.slam.features.types import Features
 from worker.slam.inpainting.lookahead import LookaheadConfig, moving_pixels, relative_pose_pnp
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
@@ -41,13 +41,13 @@ class RestorationStageConfig:
     """Extract ORB keypoints in restored regions and give them to the tracker. Off by default: they raise ATE
     many times over. Online, the target is warped at the motion model's *predicted* pose, so features found in
     the restored region agree with the prediction and pull the estimate towards it instead of correcting it."""
-    min_response_quantile: float = 0.5
+    min_response_quantile: float = valid(0.5, 0.0, 1.0)
     """Restored keypoints must respond at least as strongly as this quantile of the frame's own keypoints."""
-    min_depth_confidence: float = 0.5
+    min_depth_confidence: float = valid(0.5, 0.0, 1.0)
     """Restored keypoints need restored depth at least this confident."""
-    min_hole_fraction: float = 0.001
+    min_hole_fraction: float = valid(0.001, 0.0, 1.0)
     """Holes smaller than this fraction of the image are not worth restoring."""
-    previews: int = 6
+    previews: int = valid(6, 0, 1_000)
     """Frames whose raw / mask / restored images are kept as preview artifacts."""
 
     def __post_init__(self) -> None:
