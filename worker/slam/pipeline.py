@@ -110,7 +110,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     timer = _Timer()
     rel: list[tuple[int, np.ndarray]] = []  # per frame: (reference keyframe, T_ref_frame)
     stamps, tracked = np.zeros(total), np.zeros(total, bool)
-    n_reloc = n_new_maps = 0
+    n_reloc = n_new_maps = n_merges = 0
     frame_info: list[dict] = []
     stage_info: dict[str, list[float]] = defaultdict(list)
     cpu_tracking: list[float] = []  # CPU seconds (all threads): comparable when the machine is shared
@@ -150,6 +150,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
                                **{k2: v for k2, v in inputs.info.items() if isinstance(v, (int, float))}})
             n_reloc += int(res.relocalised)
             n_new_maps += int(res.new_map)
+            n_merges += int(res.merged)
             rel.append(_relative(smap, res))
             if progress is not None:
                 progress(k + 1, total, "tracking")
@@ -172,7 +173,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
         timer("dense", t)
     metrics = {
         "frames": total, "tracked": int(tracked.sum()), "lost": int((~tracked).sum()),
-        "relocalisations": n_reloc, "new_maps": n_new_maps,
+        "relocalisations": n_reloc, "new_maps": n_new_maps, "map_merges": n_merges,
         "keyframes": len(smap), "map_points": smap.points.n_alive,
         "loops": closer.n_loops if closer else 0, "loops_applied": closer.n_applied if closer else 0,
         "fps": round(total / loop_s, 2) if loop_s > 0 else None,

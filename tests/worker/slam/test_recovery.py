@@ -89,5 +89,28 @@ def test_metrics_count_new_maps(tmp_path):
     cfg = get_preset("orb-only")
     cfg = replace(cfg, dense=replace(cfg.dense, enabled=False))
     run = run_pipeline(seq, cfg)
-    assert (run.metrics["new_maps"], run.metrics["lost"]) == (1, 1)
+    assert (run.metrics["new_maps"], run.metrics["lost"], run.metrics["map_merges"]) == (1, 1, 0)
     assert run.tracked.tolist() == [True] * 6 + [False, True]
+
+
+def test_a_new_map_that_sees_the_old_one_again_is_merged_onto_it():
+    tr = Tracker(CAM, _tracking(get_preset("orb-only"), reset_max_keyframes=0))
+    poses = trajectory(6, yaw_span_deg=5)
+    res, _, _ = _lose_view(tr)
+    assert res.new_map
+    # turn from the opposite wall back to the first view, tracking in the new map until it merges
+    merged = None
+    for k, yaw in enumerate(np.arange(175.0, -1.0, -5.0)):
+        T = pose([0.1, 0.0, 0.2], yaw)
+        got = tr.track(7 + k, (7 + k) / 30, *render(T))
+        assert got.ok
+        if got.merged:
+            merged = (got, T)
+            break
+    assert merged is not None and len(tr.map_starts) == 1
+    got, T = merged
+    dt, dr = pose_distance(got.T_WC, inv(poses[0]) @ T)  # the first map's world, bridge error removed
+    assert dt < 0.02 and np.degrees(dr) < 1
+    # and the new map's first keyframe moved with it (it was placed at the prediction, 180 degrees off)
+    dt, _ = pose_distance(res.keyframe.T_WC, inv(poses[0]) @ BEHIND)
+    assert dt < 0.05

@@ -52,6 +52,16 @@ class Map:
         items.sort(reverse=True)
         return [j for _, j in items[:n]]
 
+    def move_keyframes_since(self, first_kf: int, C: np.ndarray) -> None:
+        """Apply world correction `C` (4,4; new world <- old world) to keyframes >= `first_kf` and the points
+        they created: a map started after a loss, moved rigidly onto the map it is merged into."""
+        for kf in self.keyframes[first_kf:]:
+            kf.T_WC = C @ kf.T_WC
+        p = self.points
+        mine = np.flatnonzero(p.first_kf[: p.n] >= first_kf)
+        p.pos[mine] = p.pos[mine] @ C[:3, :3].T + C[:3, 3]
+        p.normal[mine] = p.normal[mine] @ C[:3, :3].T
+
     def poses(self) -> np.ndarray:
         """(K,4,4) T_WC of all keyframes."""
         return np.stack([kf.T_WC for kf in self.keyframes]) if self.keyframes else np.zeros((0, 4, 4))

@@ -24,6 +24,11 @@ def relocalisation_candidates(slam_map: Map, n_recent: int, around: int | None) 
     return out
 
 
+def older_map_candidates(before: int, n_recent: int) -> list[int]:
+    """Keyframes of the maps before keyframe `before`: the newest `n_recent`, then every 5th older one."""
+    return list(range(before - 1, max(-1, before - 1 - n_recent), -1)) + list(range(before - 1 - n_recent, -1, -5))
+
+
 def pnp_against_keyframe(slam_map: Map, kf_id: int, feats: Features, K: np.ndarray,
                          min_inliers: int) -> tuple[np.ndarray, int] | None:
     """(T_WC, inliers) of a frame from its descriptor matches to keyframe `kf_id`'s map points, or None."""

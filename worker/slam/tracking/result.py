@@ -27,6 +27,8 @@ class TrackResult:
     keyframe: KeyFrame | None = None
     new_map: bool = False
     """This (lost) frame started a new map as its first keyframe (see `recovery.LossAction`)."""
+    merged: bool = False
+    """This keyframe relocalised in an older map, and its map (started after a loss) was moved onto it."""
 
     @property
     def n_tracked(self) -> int:

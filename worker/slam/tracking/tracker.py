@@ -10,8 +10,9 @@ afterwards on the keyframe it returns.
 Maps start only on frames that give `init_min_points` new points. When a frame neither tracks nor
 relocalises, `recovery.after_loss` decides: wait, or start a new map at the motion model's pose (a
 constant-velocity bridge in the same world frame, so later frames keep consistent poses), discarding the lost
-map's points first when it was young. Old maps' keyframes stay for relocalisation and loop closure, whose
-pose graph (consecutive-keyframe edges span the bridge) corrects the new map when a loop connects them.
+map's points first when it was young. Old maps' keyframes stay for relocalisation and loop closure. Each
+keyframe of a new map tries to relocalise in the older maps; when one does, the new map is moved rigidly onto
+the old one (merged) and tracking continues on both maps' points.
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.search import KeypointIndex
 from worker.slam.features.types import Features
 from worker.slam.geometry.pose_optimizer import PoseEstimate, optimize_pose
-from worker.slam.geometry.se3 import transform
+from worker.slam.geometry.se3 import inv, transform
 from worker.slam.map.keyframe import KeyFrame
 from worker.slam.map.map import Map
 from worker.slam.tracking.inputs import TrackInputs
@@ -33,7 +34,7 @@ from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_key
 from worker.slam.tracking.motion import ConstantVelocityModel
 from worker.slam.tracking.projection import search_by_projection
 from worker.slam.tracking.recovery import LossAction, after_loss, can_start_map
-from worker.slam.tracking.relocalization import pnp_against_keyframe, relocalisation_candidates
+from worker.slam.tracking.relocalization import older_map_candidates, pnp_against_keyframe, relocalisation_candidates
 from worker.slam.tracking.result import TrackResult
 
 
@@ -52,8 +53,8 @@ class Tracker:
         self.last_kf_frame = -1
         self.last_point_ids = np.zeros(0, np.int64)
         self.lost_streak = 0
-        #: First keyframe id of the current map (maps after a loss continue the keyframe ids).
-        self.map_start_kf = 0
+        #: First keyframe id of every map not merged into an older one (maps after a loss continue the ids).
+        self.map_starts = [0]
         #: The last successfully tracked frame's result (the pipeline hands its pose to the stages).
         self.last_result: TrackResult | None = None
 
@@ -112,13 +113,15 @@ class Tracker:
             self.motion.reset(pred)  # keep the prediction as the last pose; forget the velocity
             res = TrackResult(index, timestamp, pred, False, False, feats, np.full(len(feats), -1, np.int64),
                               None, self.ref_kf)
-            action = after_loss(self.lost_streak, len(self.map) - self.map_start_kf, self.tc)
+            action = after_loss(self.lost_streak, len(self.map) - self.map_starts[-1], self.tc)
             if action is not LossAction.WAIT:
                 self._start_new_map(res, rgb, dense_depth, depth, discard_old=action is LossAction.RESET)
             return res
         self.lost_streak = 0
         if relocalised:
             self.motion.reset(est.T_WC)
+            # back in an older map: the newer ones are left as they are (no transform to merge them by)
+            self.map_starts = [s for s in self.map_starts if s <= self.ref_kf]
         else:
             self.motion.update(est.T_WC)
         res = TrackResult(index, timestamp, est.T_WC, True, relocalised, feats, pids, est.covariance,
@@ -126,6 +129,8 @@ class Tracker:
         if relocalised or self._need_keyframe(res):
             res.keyframe = self._insert_keyframe(res, rgb, dense_depth, depth)
             res.ref_kf = res.keyframe.id
+        if len(self.map_starts) > 1:
+            res.merged = self._merge_into_older_map(res)
         self.last_point_ids = pids[pids >= 0]
         self.last_result = res
         return res
@@ -165,15 +170,44 @@ class Tracker:
             return
         if discard_old:
             p = self.map.points
-            p.kill(np.flatnonzero(p.alive[: p.n] & (p.first_kf[: p.n] >= self.map_start_kf)))
+            p.kill(np.flatnonzero(p.alive[: p.n] & (p.first_kf[: p.n] >= self.map_starts[-1])))
         res.keyframe = self._insert_keyframe(res, rgb, dense_depth, measured)
         res.ref_kf = res.keyframe.id
         res.new_map = True
-        self.map_start_kf = res.keyframe.id
+        self.map_starts.append(res.keyframe.id)
         self.last_point_ids = np.zeros(0, np.int64)
         self.lost_streak = 0
         self.motion.reset(res.T_WC)
         self.last_result = res
+
+    def _merge_into_older_map(self, res: TrackResult) -> bool:
+        """Relocalise frame `res`, tracked in the newest map, in an older map; on success move the newest map
+        onto it. The same PnP + local-map tracking as relocalisation, so a merge needs what a relocalisation
+        needs; tried on every frame while a newer map exists (a returning view may last only a few frames).
+        """
+        start = self.map_starts[-1]
+        saved = (self.ref_kf, self.local_kfs, self.last_point_ids)
+        for kf_id in older_map_candidates(start, self.tc.reloc_keyframes):
+            got = pnp_against_keyframe(self.map, kf_id, res.feats, self.K, self.tc.reloc_min_inliers)
+            if got is None:
+                continue
+            self.local_kfs = [kf_id] + self.map.best_covisible(kf_id, self.tc.local_map_keyframes - 1)
+            self.last_point_ids = np.zeros(0, np.int64)
+            est, _ = self._track_local_map(res.feats, got[0], wide=False)
+            if est is None:
+                continue
+            old_local = self.local_kfs
+            self.map.move_keyframes_since(start, est.T_WC @ inv(res.T_WC))
+            res.T_WC = est.T_WC
+            self.motion.last = res.T_WC.copy()  # the velocity is relative: it holds in either world
+            # the merged map counts from the start of the map it joined (maps in between join it too)
+            self.map_starts = [s for s in self.map_starts if s <= kf_id]
+            # track on both maps' points from now on: shared observations will link them in covisibility
+            self.ref_kf, self.last_point_ids = saved[0], saved[2]
+            self.local_kfs = saved[1] + [i for i in old_local if i not in saved[1]]
+            return True
+        self.ref_kf, self.local_kfs, self.last_point_ids = saved
+        return False
 
     def _local_points(self) -> np.ndarray:
         kfs = self.map.keyframes
