@@ -32,6 +32,9 @@ class LookaheadConfig:
     in_front_m: float = valid(0.10, 0.0, 10.0)
     """A future point this much (plus `in_front_rel` of the depth) in front of the target's depth is moving."""
     in_front_rel: float = valid(0.03, 0.0, 1.0)
+    max_descriptors: int = valid(300, 20, 100_000)
+    """PnP matches at most this many of the target's static keypoints with depth (evenly picked): brute-force
+    matching every future candidate against all of them was the look-ahead's largest cost."""
     mask_stride: int = valid(2, 1, 16)
     """The moving-pixel test runs on every n-th pixel (then upsampled): the mask is grown anyway."""
     mask_grow_px: int = valid(9, 0, 100)
@@ -63,6 +66,8 @@ def relative_pose_pnp(target: Features, target_static: np.ndarray, future: Featu
     use = np.flatnonzero((target.depth > 0) & target_static[y, x])
     if len(use) < config.min_pnp_inliers:
         return None
+    if len(use) > config.max_descriptors:
+        use = use[np.linspace(0, len(use) - 1, config.max_descriptors).astype(int)]
     matches = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True).match(target.desc[use], future.desc)
     matches = [m for m in matches if m.distance < 64]
     if len(matches) < config.min_pnp_inliers:

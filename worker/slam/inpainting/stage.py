@@ -154,7 +154,8 @@ class RestorationStage:
         sel = self.cfg.selection
         last = min(frame.index + sel.window, len(seq) - 1)
         wanted = range(frame.index + sel.candidate_stride, last + 1, sel.candidate_stride)
-        self.ahead = {j: v for j, v in self.ahead.items() if j in wanted}
+        # kept for the whole window, not just this frame's candidates: the next frame's (other parity) need them
+        self.ahead = {j: v for j, v in self.ahead.items() if frame.index < j <= last}
         out: dict[int, tuple[Frame, np.ndarray]] = {}
         for j in wanted:
             if j not in self.ahead:

@@ -102,7 +102,18 @@ def test_future_pose_and_moving_pixels_from_geometry():
     T_ft, inliers = est
     true = np.linalg.inv(camera_pose(TARGET + 4)) @ camera_pose(TARGET)
     assert inliers >= cfg.min_pnp_inliers
-    assert np.linalg.norm(T_ft[:3, 3] - true[:3, 3]) < 0.01
+    # what restoration needs: the target's pixels land where the true motion puts them (on a plane, a small
+    # translation error traded against rotation is invisible)
+    ys, xs = np.mgrid[0:H:8, 0:W:8]
+    z = tgt.depth[ys, xs].ravel()
+    P = np.stack([(xs.ravel() - K[0, 2]) / K[0, 0] * z, (ys.ravel() - K[1, 2]) / K[1, 1] * z, z], 1)
+
+    def project(T: np.ndarray) -> np.ndarray:
+        Q = P @ T[:3, :3].T + T[:3, 3]
+        return (Q[:, :2] / Q[:, 2:]) * K[0, 0]
+
+    assert np.median(np.linalg.norm(project(T_ft) - project(true), axis=1)) < 0.5
+    assert np.percentile(np.linalg.norm(project(T_ft) - project(true), axis=1), 95) < 2.5
     dyn = moving_pixels(fut.depth, T_ft, tgt.depth, person(TARGET), K, cfg)
     assert dyn[person(TARGET + 4)].mean() > 0.99  # in front of the wall the target sees
     static = ~person(TARGET + 4) & ~(cv2.dilate(person(TARGET + 4).astype(np.uint8), np.ones((25, 25))) > 0)
