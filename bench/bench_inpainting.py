@@ -26,7 +26,7 @@ from worker.slam.io.sequence import Sequence
 from worker.slam.truth import load_truth, restoration_psnr
 
 
-def bench_sequence(root: Path, camera: str, n_frames: int, offline: bool, config: RestorationConfig) -> dict:
+def bench_sequence(root: Path, camera: str, n_frames: int, both_sided: bool, config: RestorationConfig) -> dict:
     seq = Sequence(root, parse_camera(camera))
     truth = load_truth(root)
     if truth is None:
@@ -49,12 +49,12 @@ def bench_sequence(root: Path, camera: str, n_frames: int, offline: bool, config
                                     "hole": [], "ms": [],
             "refs": [], "seen": [], "seen_psnr": [], "unseen_psnr": []}
     depth_errors: list[np.ndarray] = []
-    sel_cfg = ReferenceSelectionConfig(online=not offline)
-    window = range(-15, 16) if offline else range(-15, 0)
+    sel_cfg = ReferenceSelectionConfig()
+    window = range(-15, 16) if both_sided else range(-15, 0)
     for i in picks:
         f, hole, desc = frame(i)
         cands = [Candidate(i + k, pose[i + k], frame(i + k)[2]) for k in window if k and i + k in pose]
-        sel = select_references(Candidate(i, pose[i], desc), cands, sel_cfg)
+        sel = select_references(Candidate(i, pose[i], desc), cands, sel_cfg, both_sided)
         refs = [ReferenceView(frame(j)[0].rgb, frame(j)[0].depth, pose[j], frame(j)[1]) for j in sel.indices]
         t0 = time.perf_counter()
         out = restore_frame(f.rgb, f.depth, hole, pose[i], refs, seq.camera.K, config)

@@ -14,9 +14,7 @@ class ReferenceSelectionConfig:
     """How the reference library of a target frame is chosen."""
 
     window: int = valid(15, 1, 1_000)
-    """Candidates are the frames up to `window` before (and, offline, after) the target."""
-    online: bool = True
-    """Online: past frames only (the live pipeline). Offline: both sides."""
+    """Candidates are the frames up to `window` before (and, both-sided, after) the target."""
     min_match_ratio: float = valid(0.15, 0.0, 1.0)
     """Information test: ORB matches with the target / target's features."""
     min_translation_m: float = valid(0.01, 0.0001, 10.0)
@@ -28,8 +26,8 @@ class ReferenceSelectionConfig:
     candidate_stride: int = valid(2, 1, 100)
     """Only every n-th frame of the window is a candidate: neighbours see nearly the same background, and the
     information test (a brute-force match per candidate) dominated the stage's time at stride 1."""
-    both_sides: bool = True
-    """Offline: alternate the best past and the best future frame. A person walking across the view uncovers
+    alternate_sides: bool = True
+    """Both-sided: alternate the best past and the best future frame. A person walking across the view uncovers
     one side of the hole in earlier frames and the other side in later ones, so a past + future pair sees more
     of the hole than the two best-scored frames of one side."""
     max_target_descriptors: int = valid(256, 8, 100_000)
@@ -75,14 +73,16 @@ def match_ratio(desc_target: np.ndarray | None, desc_cand: np.ndarray | None,
 
 
 def select_references(target: Candidate, candidates: list[Candidate],
-                      config: ReferenceSelectionConfig = ReferenceSelectionConfig()) -> Selection:
-    """Pick 2-4 references: informative (match ratio) and displaced (Δp > τ and Δθ > γ), best score first.
+                      config: ReferenceSelectionConfig = ReferenceSelectionConfig(),
+                      both_sided: bool = False) -> Selection:
+    """Pick 2-4 references: informative (match ratio) and displaced (Δp > τ and Δθ > γ), best score first;
+    from the `window` frames before the target, and after it too when `both_sided`.
 
     Score = match ratio × (1 + translation / τ): shared content matters, and more baseline shows more of the
     background behind a moving object.
     """
     lo = target.index - config.window
-    hi = target.index if config.online else target.index + config.window
+    hi = target.index + config.window if both_sided else target.index
     scored = []
     for c in candidates:
         if c.index == target.index or not lo <= c.index <= hi or (target.index - c.index) % config.candidate_stride:
@@ -97,7 +97,7 @@ def select_references(target: Candidate, candidates: list[Candidate],
     passing = [s for s in scored if s[0]]
     relaxed = len(passing) < config.min_refs
     pool = scored if relaxed else passing
-    if not config.online and config.both_sides:
+    if both_sided and config.alternate_sides:
         pool = _alternate([s for s in pool if s[2] < target.index], [s for s in pool if s[2] > target.index])
     chosen = pool[: config.max_refs]
     return Selection([s[2] for s in chosen], {s[2]: s[3] for s in chosen}, relaxed)

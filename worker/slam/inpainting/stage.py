@@ -11,7 +11,7 @@ depth replace the raw frame for keypoint depth and the dense map, and ORB keypoi
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -114,8 +114,7 @@ class RestorationStage:
         if both and inputs.features is not None:
             future = self._future_poses(frame, hole, inputs.features, T_pred, ctx)
             cands += [Candidate(j, T_WC, self.ahead[j][1].desc) for j, (_, T_WC) in future.items()]
-        sel_cfg = replace(self.cfg.selection, online=not both)
-        sel = select_references(Candidate(frame.index, T_pred, desc), cands, sel_cfg)
+        sel = select_references(Candidate(frame.index, T_pred, desc), cands, self.cfg.selection, both)
         self.relaxed += int(sel.relaxed)
         for j in sel.indices:
             if j in future:  # moving pixels only for the chosen: the test costs a full-image warp
