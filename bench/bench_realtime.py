@@ -216,7 +216,8 @@ def _print_tables(rows: list[Row]) -> None:
     print("|" + "---|" * 10)
     for r in rows:
         if r.skipped:
-            print(f"| {r.sequence} | {r.method} | skipped: {r.skipped} |" + " |" * 7)
+            reason = " ".join(r.skipped.split())[:300]  # one table cell: OpenCV's messages span lines
+            print(f"| {r.sequence} | {r.method} | skipped: {reason} |" + " |" * 7)
             continue
         m = r.metrics
         ate = m.get("ate", {}).get("rmse")
