@@ -110,6 +110,11 @@ class MappingConfig:
     """Points younger than this (keyframes) are not culled by observation count."""
     new_point_max_depth_m: float = valid(4.0, 0.01, 1000.0)
     """New map points are created from keyframe depth up to this distance."""
+    triangulate_neighbours: int = valid(0, 0, 1_000)
+    """Covisible keyframes each new keyframe triangulates new points with, for keypoints that got none from
+    depth (no depth, or beyond `new_point_max_depth_m`); 0 turns triangulation off."""
+    triangulate_min_parallax_deg: float = valid(1.0, 0.0, 90.0)
+    """Smallest angle between the two viewing rays of a triangulated point."""
     final_global_ba: bool = True
     """Bundle-adjust all keyframes and points once at the end (the first keyframe fixed)."""
     global_ba_iterations: int = valid(10, 0, 1_000)

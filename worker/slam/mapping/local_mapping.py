@@ -7,6 +7,7 @@ from worker.slam.config import MappingConfig
 from worker.slam.map.keyframe import KeyFrame
 from worker.slam.map.map import Map
 from worker.slam.mapping.local_ba import BAStats, local_bundle_adjust
+from worker.slam.mapping.triangulation import triangulate_new_points
 
 MIN_OBSERVATIONS = 2
 
@@ -36,10 +37,17 @@ class LocalMapper:
         self.inv_sigma2, self.huber_px = inv_sigma2, huber_px
         self.n_processed = 0
         self.culled = 0
+        self.triangulated = 0
+        # the pyramid's scale factor, from the per-octave 1/sigma^2 it was built with
+        self.scale_factor = float(np.sqrt(inv_sigma2[0] / inv_sigma2[1]))
         self.last_ba: BAStats | None = None
 
     def process(self, kf: KeyFrame) -> None:
         self.culled += cull_points(self.map, kf.id, self.cfg)
+        if self.cfg.triangulate_neighbours:
+            self.triangulated += triangulate_new_points(self.map, kf, self.cfg.triangulate_neighbours, self.K,
+                                                        self.inv_sigma2, self.scale_factor,
+                                                        self.cfg.triangulate_min_parallax_deg)
         self.n_processed += 1
         if not self.cfg.local_ba or len(self.map) < 2 or self.n_processed % self.cfg.local_ba_every:
             return
