@@ -18,7 +18,8 @@ def write_sequence(root: Path, n: int = 3, size: tuple[int, int] = (64, 48), dep
     for i in range(n):
         t = 100.0 + i * dt
         cv2.imwrite(str(root / f"rgb/{t:.6f}.png"), rng.integers(0, 255, (h, w, 3), dtype=np.uint8))
-        cv2.imwrite(str(root / f"depth/{t + 0.005:.6f}.png"), np.full((h, w), 5000 if depth_dtype == np.uint16 else 50, dtype=depth_dtype))
+        depth = np.full((h, w), 5000 if depth_dtype == np.uint16 else 50, dtype=depth_dtype)
+        cv2.imwrite(str(root / f"depth/{t + 0.005:.6f}.png"), depth)
         rgb_lines.append(f"{t:.6f} rgb/{t:.6f}.png")
         depth_lines.append(f"{t + 0.005:.6f} depth/{t + 0.005:.6f}.png")
         gt_lines.append(f"{t:.6f} {i * 0.1} 0 0 0 0 0 1")
