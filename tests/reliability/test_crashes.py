@@ -102,7 +102,7 @@ def test_worker_killed_mid_job_is_reaped_on_restart_and_the_queue_goes_on(settin
 def test_stale_job_is_requeued_once_then_failed(settings, procs, tmp_path):
     """Stale-heartbeat path with `requeue_orphans=1`: workers of other names reap the dead one's job
     after `heartbeat_timeout_s`; the first death requeues it (attempt 2, run by another worker), the
-    second fails it. Jobs queued behind it still complete."""
+    second fails it as a poison job. Jobs queued behind it still complete."""
     env = _env(settings, VTD_HEARTBEAT_TIMEOUT_S="2", VTD_REQUEUE_ORPHANS="1")
     with api_client(settings) as client:
         long_seq, short_seq = _sequences(client, tmp_path)
@@ -126,7 +126,8 @@ def test_stale_job_is_requeued_once_then_failed(settings, procs, tmp_path):
         procs.wait_ready(third)
         failed = wait_for("the job to fail after its second death",
                           lambda: (j := job(client, victim))["status"] in FINAL and j, context=procs.tails)
-        assert failed["status"] == "failed" and "stopped reporting" in failed["error"], failed
+        # the second death makes it a poison job: failed with that reason, never handed on again
+        assert failed["status"] == "failed" and "poison job" in failed["error"], failed
         assert (failed["attempts"], failed["requeues"]) == (2, 1)  # requeued once, not twice
         assert not (settings.data_dir / "artifacts" / victim).exists()
         assert not list((settings.data_dir / "staging").glob(f"job-{victim}-*"))
