@@ -1,0 +1,124 @@
+"""Dense map cleanliness and accuracy per fusion method (point merge, TSDF, with or without carving); prints markdown.
+
+    .venv/bin/python bench/bench_map.py --sequence SYNTH:tum3 --sequence AUG:7scenes --max-frames 300
+
+Sequences with truth (`vtdslam synth` / `vtdslam augment`) get both checks, others the accuracy check
+only (the people columns read "-"). For every method the pipeline runs
+once (a spawned `vtdslam run`), then `map.ply` is checked two ways:
+
+- *people in the map*: every 3rd frame's truly moving pixels (truth masks) are back-projected with that
+  frame's measured depth at its ground-truth pose aligned onto the estimate (`groundtruth_aligned.txt`);
+  the share of map points within 5 cm of any of them is reported. Static surfaces a person touched (the
+  floor under a foot, a wall walked along) count there too, so a second column keeps only those points that
+  are also more than 5 cm from the true static scene (the truth's background depth of the same frames):
+  what is really a person in the map;
+- *accuracy*: bench_slam's check of map points against held-out frames' measured depth at their GT poses.
+
+Benchmarks print figures; they assert nothing.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+NEAR_M = 0.05
+
+
+def _backproject(depth: np.ndarray, keep: np.ndarray, K: np.ndarray, T_WC: np.ndarray, stride: int) -> np.ndarray:
+    ok = keep & (depth > 0)
+    v, u = np.nonzero(ok)
+    z = depth[ok].astype(np.float64)
+    Xc = np.column_stack([(u * stride - K[0, 2]) / K[0, 0] * z, (v * stride - K[1, 2]) / K[1, 1] * z, z])
+    return Xc @ T_WC[:3, :3].T + T_WC[:3, 3]
+
+
+def truth_points(seq, truth, aligned: np.ndarray, every: int = 3, stride: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """World points (estimate frame) of every `every`-th frame: the truly moving pixels (N,3), and the
+    static scene behind everything (its true background depth) (M,3)."""
+    K = seq.camera.K
+    people, static = [], []
+    for i in range(0, min(len(aligned), len(truth), len(seq)), every):
+        mask = truth.mask(i)[::stride, ::stride]
+        people.append(_backproject(seq[i].depth[::stride, ::stride], mask, K, aligned[i], stride))
+        bg = truth.background_depth(i)[::2 * stride, ::2 * stride]
+        static.append(_backproject(bg, np.ones(bg.shape, bool), K, aligned[i], 2 * stride))
+    return np.vstack(people), np.vstack(static)
+
+
+def check(seq_dir: Path, camera: str, run: Path) -> dict:
+    from scipy.spatial import cKDTree
+
+    from bench_slam import map_check
+    from formats.ply import read_ply
+    from worker.slam.camera import load_camera_file, parse_camera
+    from worker.slam.io.sequence import Sequence
+    from worker.slam.io.trajectory import read_tum_trajectory
+    from worker.slam.truth import load_truth
+
+    seq = Sequence(seq_dir, load_camera_file(seq_dir) or parse_camera(camera))
+    truth = load_truth(seq_dir)
+    xyz, _ = read_ply(run / "map.ply")
+    aligned = read_tum_trajectory(run / "groundtruth_aligned.txt").poses
+    traj = read_tum_trajectory(run / "trajectory.txt")
+    X = xyz.astype(np.float64)
+    near = off_static = None
+    if truth is not None:
+        people, static = truth_points(seq, truth, aligned)
+        near = cKDTree(people).query(X, k=1)[0] < NEAR_M if len(people) else np.zeros(len(xyz), bool)
+        off_static = cKDTree(static).query(X, k=1)[0] > NEAR_M
+    kf_stamps = read_tum_trajectory(run / "keyframes.txt").timestamps
+    kf_frames = {int(i) for i in np.flatnonzero(np.isin(np.round(traj.timestamps, 6), np.round(kf_stamps, 6)))}
+    metrics = json.loads((run / "metrics.json").read_text())
+    known = near is not None and off_static is not None and len(xyz) > 0
+    out = {"points": int(len(xyz)), "near_people": float(near.mean()) if known else None,  # type: ignore[union-attr]
+           "on_people": float((near & off_static).mean()) if known else None,  # type: ignore[operator]
+           "ate": (metrics.get("ate") or {}).get("rmse"), "dense_ms": (metrics.get("timings_ms") or {}).get("dense")}
+    out.update(map_check(seq, traj, xyz, kf_frames, 0))
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--sequence", action="append", required=True, help="DIR:CAMERA (with truth/)")
+    ap.add_argument("--methods", default="points,points+carve,tsdf",
+                    help="comma-separated dense.method values, each optionally with +carve (dense.carve)")
+    ap.add_argument("--preset", default="full")
+    ap.add_argument("--max-frames", type=int, default=300)
+    ap.add_argument("--out", default=None, help="where runs go (default: a temp folder)")
+    args = ap.parse_args()
+    base = Path(args.out or tempfile.mkdtemp(prefix="bench_map_"))
+    rows = []
+    for spec in args.sequence:
+        seq_dir, camera = spec.rsplit(":", 1)
+        for method in args.methods.split(","):
+            run = base / f"{Path(seq_dir).name}_{method}"
+            cmd = [str(ROOT / ".venv/bin/vtdslam"), "run", seq_dir, "--camera", camera, "--out", str(run),
+                   "--preset", args.preset, "--max-frames", str(args.max_frames),
+                   "--config", json.dumps({"dense": {"method": method.split("+")[0], "carve": "+carve" in method}})]
+            subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+            rows.append((Path(seq_dir).name, method, check(Path(seq_dir), camera, run)))
+    print(f"runs in {base}\n")
+    print(f"| sequence | dense map | points | within {NEAR_M * 100:.0f} cm of a person | of those, off the static "
+          "scene | median to held-out depth, GT poses (m) | within 5 cm | ATE (m) | dense ms |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name, method, r in rows:
+        share = "-" if r["near_people"] is None else f"{100 * r['near_people']:.2f} %"
+        on = "-" if r["on_people"] is None else f"{100 * r['on_people']:.2f} %"
+        med = "-" if r.get("median_m_gt") is None else f"{r['median_m_gt']:.4f}"
+        w5 = "-" if r.get("within_5cm_gt") is None else f"{r['within_5cm_gt']:.3f}"
+        ate = "-" if r["ate"] is None else f"{r['ate']:.4f}"
+        print(f"| {name} | {method} | {r['points']} | {share} | {on} | {med} | {w5} | {ate} | {r['dense_ms']} |")
+
+
+if __name__ == "__main__":
+    main()
