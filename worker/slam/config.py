@@ -154,9 +154,10 @@ class DenseConfig:
     volume, where later views carve out what moved away (`worker.slam.mapping.tsdf`)."""
     tsdf_trunc_voxels: float = valid(4.0, 1.0, 100.0)
     """TSDF truncation band in voxels (`method: tsdf`)."""
-    carve: bool = False
+    carve: bool = True
     """Drop map points that keyframes' measured depth sees through more often than it sees them: what moved
-    away after it entered the map, e.g. a person segmentation missed (`worker.slam.mapping.carve`)."""
+    away after it entered the map, e.g. a person segmentation missed (`worker.slam.mapping.carve`; README
+    Results, "Dense map", for why it is on)."""
 
 
 @dataclass
