@@ -30,6 +30,9 @@ class ReferenceSelectionConfig:
     """Both-sided: alternate the best past and the best future frame. A person walking across the view uncovers
     one side of the hole in earlier frames and the other side in later ones, so a past + future pair sees more
     of the hole than the two best-scored frames of one side."""
+    min_gap_frames: int = valid(5, 0, 1_000)
+    """References at least this many frames apart (as long as enough candidates are left): two neighbouring
+    frames see nearly the same background, so the second would add little that the first does not."""
     max_target_descriptors: int = valid(256, 8, 100_000)
     """The information test matches at most this many of the target's descriptors (evenly picked): the
     matched fraction is an estimate, and the cost grows with target × candidate descriptors."""
@@ -99,7 +102,13 @@ def select_references(target: Candidate, candidates: list[Candidate],
     pool = scored if relaxed else passing
     if both_sided and config.alternate_sides:
         pool = _alternate([s for s in pool if s[2] < target.index], [s for s in pool if s[2] > target.index])
-    chosen = pool[: config.max_refs]
+    chosen: list[tuple[bool, float, int, float]] = []
+    for cand in pool:  # spread out first, then fill up with the rest in score order
+        if len(chosen) < config.max_refs and all(abs(cand[2] - c[2]) >= config.min_gap_frames for c in chosen):
+            chosen.append(cand)
+    for cand in pool:
+        if len(chosen) < config.min_refs and cand not in chosen:
+            chosen.append(cand)
     return Selection([s[2] for s in chosen], {s[2]: s[3] for s in chosen}, relaxed)
 
 

@@ -157,6 +157,8 @@ def test_reference_selection_prefers_informative_moved_frames():
     assert 2 <= len(sel.indices) <= 4 and not sel.relaxed
     assert all(4 <= i <= 16 for i in sel.indices)  # inside the 15-frame window, at least 1 cm away
     assert all(sel.match_ratio[i] >= 0.15 for i in sel.indices)
+    gaps = np.diff(sorted(sel.indices))
+    assert np.all(gaps >= ReferenceSelectionConfig().min_gap_frames)  # spread out, not neighbours
 
 
 def test_restoration_on_real_7scenes_beats_telea(redkitchen):
