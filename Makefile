@@ -39,9 +39,16 @@ run: $(STAMP)
 	@echo "==> dashboard at http://$${VTD_HOST:-127.0.0.1}:$${VTD_PORT:-8000}/ (api, worker and 3D viewer; this terminal stays with them: Ctrl-C stops all)"
 	$(BIN)/vtdslam serve
 
-test: $(STAMP)
+# Static checks: import contracts, ruff, mypy (settings in pyproject.toml); `make test` runs them first.
+lint: $(STAMP)
 	@echo "==> import contracts"
 	$(BIN)/lint-imports --no-cache
+	@echo "==> lint (ruff)"
+	$(BIN)/ruff check .
+	@echo "==> types (mypy)"
+	$(BIN)/mypy
+
+test: lint
 	@echo "==> test suite"
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 

@@ -27,8 +27,8 @@ from worker.slam.camera import parse_camera  # noqa: E402
 from worker.slam.config import PipelineConfig  # noqa: E402
 from worker.slam.dynamic.culling import CullingConfig, cull_frame  # noqa: E402
 from worker.slam.features.orb import OrbExtractor  # noqa: E402
-from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.geometry.se3 import inv  # noqa: E402
+from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.truth import load_truth  # noqa: E402
 
 

@@ -37,7 +37,7 @@ def main() -> None:
         cfg = SynthConfig(frames=n, people=args.people, trajectory=path, shared_dir=shared)
         world = SyntheticWorld(cfg)
         world.frame(0)  # warm-up
-        fps = timed(lambda: [world.frame(i) for i in range(n)], n)
+        fps = timed(lambda w=world: [w.frame(i) for i in range(n)], n)
         rows.append((f"synth render ({world.source.split(':')[0]}, {args.people} people)", fps))
     with tempfile.TemporaryDirectory() as tmp:
         cfg = SynthConfig(frames=n, people=args.people, trajectory="walk")

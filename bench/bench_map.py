@@ -56,9 +56,9 @@ def truth_points(seq, truth, aligned: np.ndarray, every: int = 3, stride: int = 
 
 
 def check(seq_dir: Path, camera: str, run: Path) -> dict:
+    from bench_slam import map_check
     from scipy.spatial import cKDTree
 
-    from bench_slam import map_check
     from formats.ply import read_ply
     from worker.slam.camera import load_camera_file, parse_camera
     from worker.slam.io.sequence import Sequence

@@ -37,8 +37,9 @@ def build_archive(path: Path, size_mb: int) -> tuple[int, int]:
     import numpy as np
 
     rng = np.random.default_rng(0)
-    ok, rgb = cv2.imencode(".png", rng.integers(0, 255, (480, 640, 3), dtype=np.uint8), [cv2.IMWRITE_PNG_COMPRESSION, 1])
-    ok2, depth = cv2.imencode(".png", rng.integers(500, 20000, (480, 640), dtype=np.uint16), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    fast = [cv2.IMWRITE_PNG_COMPRESSION, 1]
+    ok, rgb = cv2.imencode(".png", rng.integers(0, 255, (480, 640, 3), dtype=np.uint8), fast)
+    ok2, depth = cv2.imencode(".png", rng.integers(500, 20000, (480, 640), dtype=np.uint16), fast)
     assert ok and ok2
     rgb_b, depth_b = rgb.tobytes(), depth.tobytes()
     frames = max(1, size_mb * 1024 * 1024 // (len(rgb_b) + len(depth_b)))
@@ -109,7 +110,8 @@ def main() -> None:
     ap.add_argument("--size-mb", type=int, default=1024)
     ap.add_argument("--runs", type=int, default=2, help="full uploads (the best is reported with all)")
     ap.add_argument("--format", choices=["zip", "tgz", "both"], default="both",
-                    help="zip: Bonn-style stored zip (saved, then unpacked); tgz: TUM-style (unpacked while it arrives)")
+                    help="zip: Bonn-style stored zip (saved, then unpacked); "
+                         "tgz: TUM-style (unpacked while it arrives)")
     ap.add_argument("--keep", action="store_true", help="keep the temp folder")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="vtd-bench-upload-", dir=os.environ.get("VTD_BENCH_TMP")))
@@ -138,8 +140,9 @@ def main() -> None:
             frames, size = build_archive(archive, args.size_mb)
             print(f"{archive.name}: {size / 1e6:.0f} MB, {frames} frames, built in {time.perf_counter() - t0:.1f} s",
                   file=sys.stderr)
-            for label, camera, expect in [("bad camera: rejected after the body (tgz: unpacked on the fly)", "tum9", 422)] + [
-                    ("full upload (stream + unpack + validate + install)", "tum3", 201)] * args.runs:
+            cases = [("bad camera: rejected after the body (tgz: unpacked on the fly)", "tum9", 422)]
+            cases += [("full upload (stream + unpack + validate + install)", "tum3", 201)] * args.runs
+            for label, camera, expect in cases:
                 subprocess.run(["sync"], check=False)  # start each run with no dirty pages pending
                 sampler = RssSampler(api.pid)
                 sampler.start()

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -16,7 +16,7 @@ def augment_command(
     out_dir: Annotated[Path, typer.Argument(help="Folder to write the augmented sequence and truth/ into.")],
     people_from: Annotated[Path, typer.Option(
         "--people-from", help="YOLO-seg folder (images/, labels/) whose class-0 polygons are cut out.")],
-    frames: Annotated[Optional[int], typer.Option(help="Use the first N frames (default: all).")] = None,
+    frames: Annotated[int | None, typer.Option(help="Use the first N frames (default: all).")] = None,
     people: Annotated[int, typer.Option(help="People taking turns to walk through the view.")] = 2,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     camera: Annotated[str, typer.Option(

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -42,7 +42,7 @@ def register_and_submit_demo(sequence_dir: Path, preset: str) -> str:
 
 def demo_command(
     frames: Annotated[int, typer.Option(help="Number of frames (30 Hz).")] = 150,
-    out: Annotated[Optional[Path], typer.Option(help="Output folder (default: <VTD_DATA_DIR>/demo).")] = None,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default: <VTD_DATA_DIR>/demo).")] = None,
     people: Annotated[int, typer.Option(help="Number of walking figures.")] = 2,
     force: Annotated[bool, typer.Option(help="Regenerate even if the demo sequence exists.")] = False,
     preset: Annotated[str, typer.Option(help="Pipeline preset of the submitted job.")] = "full",

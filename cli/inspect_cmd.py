@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -14,7 +14,7 @@ def register(app: typer.Typer) -> None:
 
 def inspect_command(
     sequence_dir: Annotated[Path, typer.Argument(help="TUM-layout folder (rgb.txt, depth.txt, ...).")],
-    camera: Annotated[Optional[str], typer.Option(
+    camera: Annotated[str | None, typer.Option(
         help="Camera preset (tum1, tum2, tum3, bonn, 7scenes) or JSON intrinsics; camera.json in the folder wins."
     )] = None,
     samples: Annotated[int, typer.Option(help="Depth frames sampled for the validity figure.")] = 10,

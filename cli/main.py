@@ -5,8 +5,18 @@ import sys
 
 import typer
 
-from cli import augment_cmd, demo_cmd, eval_cmd, inspect_cmd, msnet_cmd, run_cmd, serve_cmd, synth_cmd, \
-    viewer_cmd, worker_cmd
+from cli import (
+    augment_cmd,
+    demo_cmd,
+    eval_cmd,
+    inspect_cmd,
+    msnet_cmd,
+    run_cmd,
+    serve_cmd,
+    synth_cmd,
+    viewer_cmd,
+    worker_cmd,
+)
 
 app = typer.Typer(
     name="vtdslam",

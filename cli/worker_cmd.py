@@ -1,7 +1,7 @@
 """`vtdslam worker`: run the job queue's consumer (the SLAM pipeline) in this process."""
 from __future__ import annotations
 
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -12,7 +12,7 @@ def register(app: typer.Typer) -> None:
 
 def worker_command(
     workers: Annotated[int, typer.Option(min=1, max=64, help="Jobs run at once (threads).")] = 1,
-    name: Annotated[Optional[str], typer.Option(
+    name: Annotated[str | None, typer.Option(
         help="Worker name stored on its jobs (default: the host name). Unique per worker process: on start "
              "a worker marks jobs still 'running' under its name as failed (their process died).")] = None,
 ) -> None:

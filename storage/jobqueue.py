@@ -15,7 +15,7 @@ from huey import Huey
 TASK_NAME = "run_job"
 
 
-def register_run_job(huey: Huey, body: Callable[[str], None] | None = None) -> Any:
+def register_run_job(huey: Huey, body: Callable[[str], object] | None = None) -> Any:
     """Register ``run_job(job_id)`` on ``huey`` and return the task (call it to enqueue).
 
     Jobs are never retried by the queue: retries are explicit (``POST /jobs/{id}/retry``).

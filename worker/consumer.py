@@ -18,7 +18,6 @@ from huey.consumer import Consumer
 from storage.artifacts import ArtifactStore
 from storage.db import init_db, make_engine, make_session_factory
 from storage.queue import make_huey
-from storage.repositories import jobs
 from storage.settings import Settings
 from worker.identity import claim_name
 from worker.reaping import reap_orphans, reap_stale, start_reaper

@@ -68,8 +68,8 @@ def test_app_services_share_the_data_volume_and_the_env_file(config: dict) -> No
     for name in APP_SERVICES:
         svc = config["services"][name]
         assert svc["environment"]["VTD_DATA_DIR"] == "/data"
-        assert any(v["source"] == "data" and v["target"] == "/data" if isinstance(v, dict) else v.startswith("data:/data")
-                   for v in svc["volumes"]), svc["volumes"]
+        assert any(v["source"] == "data" and v["target"] == "/data" if isinstance(v, dict)
+                   else v.startswith("data:/data") for v in svc["volumes"]), svc["volumes"]
         # env_file was read: its settings reached the service
         assert svc["environment"]["VTD_DATABASE_URL"].startswith("postgresql://")
         assert svc["environment"]["VTD_QUEUE_URL"].startswith("redis://redis:")

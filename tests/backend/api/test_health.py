@@ -13,7 +13,8 @@ def test_openapi_lists_every_endpoint_with_examples(client):
     paths = spec["paths"]
     for path, method in [("/api/v1/sequences", "post"), ("/api/v1/sequences/import", "post"),
                          ("/api/v1/jobs", "post"), ("/api/v1/jobs/{job_id}/events", "get"),
-                         ("/api/v1/jobs/{job_id}/artifacts/{name}", "get"), ("/api/v1/batches/{batch_id}/table", "get")]:
+                         ("/api/v1/jobs/{job_id}/artifacts/{name}", "get"),
+                         ("/api/v1/batches/{batch_id}/table", "get")]:
         assert method in paths[path], (path, method)
     upload = paths["/api/v1/sequences"]["post"]["requestBody"]["content"]["multipart/form-data"]["schema"]
     assert set(upload["required"]) == {"file", "camera"}

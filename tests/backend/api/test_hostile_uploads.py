@@ -34,7 +34,7 @@ from fastapi.testclient import TestClient
 from backend.app import create_app
 from storage.settings import Settings, get_settings
 from tests.backend.api.conftest import upload
-from tests.backend.api.data import tar_gz, tar_with, write_sequence, zip_of
+from tests.backend.api.data import tar_gz, tar_with, zip_of
 
 LIMITS: dict[str, Any] = {"max_upload_bytes": 2 << 20, "max_files": 1000, "max_ratio": 5}
 """Uploads up to 2 MiB, unpacked up to 5x max(archive, 1 MiB), 1000 entries: the valid sequence fits."""

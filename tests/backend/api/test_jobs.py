@@ -229,4 +229,5 @@ def test_frames_and_presets(client, db, settings, seq_id):
     assert [(f["frame_index"], f["tracked"]) for f in page["items"]] == [(1, False), (2, True)]
     assert client.get("/api/v1/jobs/nope/frames").status_code == 404
     presets = client.get("/api/v1/presets").json()
-    assert presets == {"pipeline": list(PIPELINE_PRESETS), "camera": list(CAMERA_PRESETS)} and "tum1" in presets["camera"]
+    assert presets == {"pipeline": list(PIPELINE_PRESETS), "camera": list(CAMERA_PRESETS)}
+    assert "tum1" in presets["camera"]

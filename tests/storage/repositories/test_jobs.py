@@ -22,7 +22,8 @@ def job(session: Session, seq: Sequence) -> Job:
 
 def test_create_and_get(session: Session, job: Job, seq: Sequence) -> None:
     got = jobs.get(session, job.id)
-    assert (got.sequence_id, got.preset, got.status, got.config) == (seq.id, "full", JobStatus.QUEUED, {"seg": {"on": True}})
+    expected = (seq.id, "full", JobStatus.QUEUED, {"seg": {"on": True}})
+    assert (got.sequence_id, got.preset, got.status, got.config) == expected
     assert (got.progress, got.attempts, got.cancel_requested, got.batch_id, got.metrics) == (0.0, 1, False, None, None)
     assert got.created_at.tzinfo is not None and got.started_at is None
 
@@ -108,7 +109,8 @@ def test_progress(session: Session, job: Job) -> None:
     )
     assert stop is False
     got = jobs.get(session, job.id)
-    assert (got.progress, got.stage, got.frames_done, got.frames_total, got.timings) == (1.0, "tracking", 5, 10, {"seg": 1.0})
+    expected = (1.0, "tracking", 5, 10, {"seg": 1.0})
+    assert (got.progress, got.stage, got.frames_done, got.frames_total, got.timings) == expected
     assert jobs.update_progress(session, job.id, progress=-1) is False
     assert jobs.get(session, job.id).progress == 0.0
 
@@ -169,7 +171,8 @@ def test_retry_failed_job(session: Session, job: Job) -> None:
     metrics.add_frame_stats(session, job.id, [{"frame_index": 0, "timestamp": 0.0}])
     jobs.finish(session, job.id, "failed", error="boom")
     again = jobs.retry(session, job.id)
-    assert (again.status, again.attempts, again.progress, again.stage, again.error) == (JobStatus.QUEUED, 2, 0.0, "", None)
+    expected = (JobStatus.QUEUED, 2, 0.0, "", None)
+    assert (again.status, again.attempts, again.progress, again.stage, again.error) == expected
     assert (again.started_at, again.finished_at, again.worker, again.cancel_requested) == (None, None, None, False)
     assert again.config == {"seg": {"on": True}}  # the requested config stays
     assert again.metrics is None and metrics.get_frame_stats(session, job.id) == []

@@ -71,7 +71,8 @@ def pose(position, yaw_deg: float, pitch_deg: float = 0.0) -> np.ndarray:
 def trajectory(n: int, yaw_span_deg: float = 30.0, radius: float = 0.3) -> np.ndarray:
     """(n,4,4) smooth T_WC: a circle of `radius` in x-z while yawing over `yaw_span_deg` and nodding."""
     s = np.linspace(0, 1, n)
-    return np.stack([pose([radius * np.sin(2 * np.pi * si), 0.1 * np.sin(4 * np.pi * si), radius * (1 - np.cos(2 * np.pi * si))],
+    return np.stack([pose([radius * np.sin(2 * np.pi * si), 0.1 * np.sin(4 * np.pi * si),
+                           radius * (1 - np.cos(2 * np.pi * si))],
                           yaw_span_deg * si, -15 + 5 * np.sin(2 * np.pi * si)) for si in s])
 
 

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from worker.slam.augment.floor import Floor, estimate_floor, gravity_up
+from worker.slam.augment.floor import estimate_floor, gravity_up
 from worker.slam.augment.generator import AugmentConfig, AugmentedSequence, generate_augmented
 from worker.slam.augment.sprites import load_sprites
 from worker.slam.io.sequence import Sequence

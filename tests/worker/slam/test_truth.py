@@ -11,8 +11,13 @@ from worker.slam.errors import SequenceFormatError
 from worker.slam.io.sequence import Sequence
 from worker.slam.io.trajectory import Trajectory
 from worker.slam.synth.writer import SequenceWriter, depth_to_png
-from worker.slam.truth import (feature_precision_recall, load_truth, mask_iou, restoration_psnr,
-                              write_background_sequence)
+from worker.slam.truth import (
+    feature_precision_recall,
+    load_truth,
+    mask_iou,
+    restoration_psnr,
+    write_background_sequence,
+)
 
 
 def test_mask_iou():

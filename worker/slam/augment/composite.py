@@ -1,9 +1,9 @@
 """Pasting a cut-out person into a real RGB-D frame as a vertical billboard standing on the floor.
 
 The billboard turns to face the camera; its silhouette edge is blended over the pixels it covers (only
-pixels inside the mask change, so the truth stays exact); its depth is the plane's depth, rounded by up to `bulge_m` towards the
-camera inside the silhouette (a body is not flat). The person is drawn only where it is nearer than the real
-depth (or the real depth is unknown), and there its depth replaces the real one.
+pixels inside the mask change, so the truth stays exact); its depth is the plane's depth, rounded by up to
+`bulge_m` towards the camera inside the silhouette (a body is not flat). The person is drawn only where it
+is nearer than the real depth (or the real depth is unknown), and there its depth replaces the real one.
 """
 from __future__ import annotations
 

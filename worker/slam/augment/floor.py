@@ -1,8 +1,8 @@
 """The floor plane of a real RGB-D sequence in its ground-truth world frame, so inserted people stand on it.
 
 The world frame of 7-Scenes-like data is arbitrary (KinectFusion's), so "up" is estimated first as the common
-normal of the horizontal surfaces seen (starting from the cameras' mean image-up), then the floor is the lowest well-supported
-height along it (a histogram of back-projected depth samples).
+normal of the horizontal surfaces seen (starting from the cameras' mean image-up), then the floor is the lowest
+well-supported height along it (a histogram of back-projected depth samples).
 """
 from __future__ import annotations
 

@@ -5,9 +5,9 @@ truth files; the true background of each frame is the source frame itself (its f
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import cv2
 import numpy as np
@@ -77,7 +77,8 @@ class AugmentedSequence:
                                 fps, rng, cfg.placement)
 
     def _survey(self, rng: np.random.Generator) -> tuple[Floor, np.ndarray]:
-        """Gravity and floor plane from ~40 sampled frames and the median central depth of every 5th frame (interpolated)."""
+        """Gravity and floor plane from ~40 sampled frames and the median central depth of every 5th frame
+        (interpolated)."""
         cam = self.seq.camera
         sample = np.unique(np.linspace(0, self.n - 1, min(self.n, 40)).astype(int))
         points, normals, centre_s = [], [], []

@@ -27,11 +27,11 @@ class Features:
         return len(self.uv)
 
     @classmethod
-    def empty(cls) -> "Features":
+    def empty(cls) -> Features:
         return cls(np.zeros((0, 2)), np.zeros(0, int), np.zeros(0, np.float32), np.zeros((0, 32), np.uint8),
                    np.zeros(0, np.float32))
 
-    def select(self, idx: np.ndarray) -> "Features":
+    def select(self, idx: np.ndarray) -> Features:
         """A subset by boolean mask or index array."""
         return Features(self.uv[idx], self.octave[idx], self.response[idx], self.desc[idx], self.depth[idx],
                         None if self.uv_raw is None else self.uv_raw[idx])
@@ -42,7 +42,7 @@ class Features:
         return self.uv if self.uv_raw is None else self.uv_raw
 
     @staticmethod
-    def concat(parts: list["Features"]) -> "Features":
+    def concat(parts: list[Features]) -> Features:
         parts = [p for p in parts if p is not None and len(p)]
         if not parts:
             return Features.empty()

@@ -2,9 +2,9 @@
 a Kinect-like sensor, and exact truth (masks, static background colour and depth) for every frame."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Callable
 
 import cv2
 import numpy as np

@@ -109,7 +109,7 @@ def make_walkers(k: int, walk_lo: np.ndarray, walk_hi: np.ndarray, rng: np.rando
     walkers = []
     half = np.maximum((walk_hi - walk_lo) / 2, 0.3)
     mid = (walk_hi + walk_lo) / 2
-    for i in range(k):
+    for _ in range(k):
         r = np.array([rng.uniform(0.45, 1.0) * half[0], rng.uniform(0.3, 0.9) * half[1]])
         c = mid + rng.uniform(-1, 1, 2) * np.maximum(half - r, 0)
         speed = rng.uniform(0.8, 1.2)

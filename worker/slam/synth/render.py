@@ -71,7 +71,8 @@ class Renderer:
         """Ray directions M @ (x_n, y_n, 1) over a window, one float32 array per component."""
         xn, yn = self.xn[win], self.yn[win]
         M = M.astype(np.float32)
-        return tuple(M[i, 0] * xn + M[i, 1] * yn + M[i, 2] for i in range(3))  # type: ignore[return-value]
+        return M[0, 0] * xn + M[0, 1] * yn + M[0, 2], M[1, 0] * xn + M[1, 1] * yn + M[1, 2], \
+            M[2, 0] * xn + M[2, 1] * yn + M[2, 2]
 
     # -- static scene ----------------------------------------------------------------------------------------
     def render_static(self, T_RC: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -117,7 +118,6 @@ class Renderer:
         # Texture (u, v) = (y, z) on x-facing, (x, z) on y-facing, (x, y) on z-facing faces: z stays "up".
         u = np.where(axis == 0, p[1], p[0])
         v = np.where(axis == 2, p[1], p[2])
-        cell = s.face_cell
         x0, y0, w, h, k = (cv2.LUT(face, self._lut[i]) for i in range(5))
         tu, tv = u * k, -v * k  # texture rows grow downwards, world z upwards
         mapx = x0 + (tu - np.floor(tu / w) * w)

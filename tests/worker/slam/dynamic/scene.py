@@ -8,7 +8,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from tests.worker.slam.inpainting.scene import K, H, W, WALL_Z, pose, texture
+from tests.worker.slam.inpainting.scene import WALL_Z, H, K, W, pose, texture
 
 BOARD_Z = 1.2
 BOARD_W, BOARD_H = 0.35, 0.9

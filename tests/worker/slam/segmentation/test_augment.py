@@ -8,11 +8,10 @@ import cv2
 import numpy as np
 import torch
 
+from tests.worker.slam.segmentation.test_msnet_model import TINY
 from worker.slam.segmentation.train.augment import Cutout, paste
 from worker.slam.segmentation.train.config import presets
 from worker.slam.segmentation.train.data import build_training_data
-
-from tests.worker.slam.segmentation.test_msnet_model import TINY
 
 
 def test_paste_writes_image_and_labels() -> None:

@@ -6,13 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.worker.slam.segmentation.test_msnet_model import TINY
 from worker.slam.errors import ConfigError
-from worker.slam.segmentation import SegmentationError, Segmenter, SegmenterConfig, available_backends, \
-    make_segmenter
+from worker.slam.segmentation import SegmentationError, Segmenter, SegmenterConfig, available_backends, make_segmenter
 from worker.slam.segmentation.msnet import build_msnet
 from worker.slam.segmentation.msnet.checkpoint import default_checkpoint, load_model, save_model
-
-from tests.worker.slam.segmentation.test_msnet_model import TINY
 
 
 @pytest.fixture()

@@ -9,13 +9,12 @@ import cv2
 import numpy as np
 import pytest
 
+from tests.worker.slam.segmentation.test_msnet_model import TINY
 from worker.slam.errors import ConfigError
 from worker.slam.segmentation.train.augment import IGNORE
 from worker.slam.segmentation.train.config import load_train_config, presets
 from worker.slam.segmentation.train.data import build_training_data, expand, target_cutouts
 from worker.slam.segmentation.train.mixture import MixtureDataset, SoftSet
-
-from tests.worker.slam.segmentation.test_msnet_model import TINY
 
 
 def _frames(folder: Path, n: int = 3) -> list[Path]:

@@ -10,14 +10,13 @@ import numpy as np
 import pytest
 import torch
 
+from tests.worker.slam.segmentation.test_msnet_model import TINY
 from worker.slam.errors import ConfigError
 from worker.slam.segmentation.msnet import build_msnet
 from worker.slam.segmentation.msnet.checkpoint import load_model
 from worker.slam.segmentation.train.config import load_train_config, presets
 from worker.slam.segmentation.train.losses import msnet_loss
 from worker.slam.segmentation.train.trainer import train
-
-from tests.worker.slam.segmentation.test_msnet_model import TINY
 
 
 def test_training_steps_reduce_loss() -> None:

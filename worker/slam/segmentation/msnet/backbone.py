@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import torch
-from torch import nn
 import torch.nn.functional as F
+from torch import nn
 
 from worker.slam.segmentation.msnet.blocks import conv_bn_act, resize_pos_embed
 from worker.slam.segmentation.msnet.config import MsnetConfig
@@ -77,6 +77,6 @@ class DualPyramidBackbone(nn.Module):
             c = level(c)
             feats.append(c)
         size = feats[0].shape[-2:]
-        lat = [F.interpolate(l(f), size=size, mode="bilinear", align_corners=False) if i else l(f)
-               for i, (l, f) in enumerate(zip(self.lateral, feats))]
+        lat = [F.interpolate(conv(f), size=size, mode="bilinear", align_corners=False) if i else conv(f)
+               for i, (conv, f) in enumerate(zip(self.lateral, feats))]
         return c1, self.fuse(torch.cat(lat, dim=1))

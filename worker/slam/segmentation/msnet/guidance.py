@@ -3,8 +3,8 @@ dense global-semantic map, then upsampled with the stride-4 skip into the pixel 
 from __future__ import annotations
 
 import torch
-from torch import nn
 import torch.nn.functional as F
+from torch import nn
 
 from worker.slam.segmentation.msnet.blocks import conv_bn_act
 

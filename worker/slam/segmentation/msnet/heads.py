@@ -3,8 +3,8 @@ class head (each query's class distribution), then upsampled to the network's in
 from __future__ import annotations
 
 import torch
-from torch import nn
 import torch.nn.functional as F
+from torch import nn
 
 
 class ClassMaskHead(nn.Module):

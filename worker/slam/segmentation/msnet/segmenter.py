@@ -1,7 +1,6 @@
 """The `msnet` backend of the Segmenter protocol: resize, run MSNET, bring probabilities back to full size."""
 from __future__ import annotations
 
-
 from pathlib import Path
 
 import cv2
