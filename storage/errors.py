@@ -9,8 +9,10 @@ from __future__ import annotations
 from typing import Any
 
 
-class StorageError(Exception):
-    """Base of every domain error; ``detail`` is optional JSON-able context for the client."""
+class ServiceError(Exception):
+    """Anything the service answers with an error body: ``code``, ``http_status``, ``message`` and
+    ``detail`` (optional JSON-able context for the client). Domain errors are :class:`StorageError`; the
+    api's own (a dependency it fronts is down) live in ``backend``."""
 
     code: str = "error"
     http_status: int = 500
@@ -23,6 +25,10 @@ class StorageError(Exception):
     def to_dict(self) -> dict[str, Any]:
         """The error body the api returns (under the ``"error"`` key)."""
         return {"code": self.code, "message": self.message, "detail": self.detail}
+
+
+class StorageError(ServiceError):
+    """Base of every domain error."""
 
 
 class NotFound(StorageError):

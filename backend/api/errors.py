@@ -22,7 +22,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from backend.api.edge import REQUEST_ID_HEADER, request_id_of
-from storage.errors import StorageError, Unauthorized
+from storage.errors import ServiceError, StorageError, Unauthorized
 from storage.redact import redact_paths
 
 log = logging.getLogger("backend.api")
@@ -45,19 +45,11 @@ _HTTP_CODES = {
 }
 
 
-class ApiError(Exception):
+class ApiError(ServiceError):
     """An error of the api itself (a dependency it fronts is down), not of the domain: same body shape."""
 
-    code: str = "api_error"
-    http_status: int = 503
-
-    def __init__(self, message: str, detail: Any = None) -> None:
-        super().__init__(message)
-        self.message = message
-        self.detail = detail
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"code": self.code, "message": self.message, "detail": self.detail}
+    code = "api_error"
+    http_status = 503
 
 
 def error_body(code: str, message: str, detail: Any = None, request_id: str | None = None) -> dict[str, Any]:

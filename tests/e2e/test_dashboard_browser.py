@@ -27,10 +27,9 @@ from pathlib import Path
 import httpx
 import pytest
 
+from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
+
 ROOT = Path(__file__).resolve().parents[2]
-CHROMIUM = os.environ.get("VTD_TEST_CHROMIUM", "/usr/bin/chromium")
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--enable-unsafe-swiftshader"]
 JOB_TIMEOUT_MS = 300_000  # the pipeline runs on a shared CPU
 VIEWER_WAIT_S = 12
 UPLOAD_BYTES_PER_S = 16 * 1024 * 1024
@@ -132,15 +131,7 @@ class Processes:
 
 
 @pytest.fixture(scope="module")
-def browser_kit():
-    playwright = pytest.importorskip("playwright.sync_api", reason="Playwright's Python package is not installed")
-    if not Path(CHROMIUM).exists():
-        pytest.skip(f"no Chromium at {CHROMIUM} (apt-get install chromium)")
-    return playwright
-
-
-@pytest.fixture(scope="module")
-def service(tmp_path_factory: pytest.TempPathFactory, browser_kit) -> Iterator[Processes]:
+def service(tmp_path_factory: pytest.TempPathFactory, playwright_api) -> Iterator[Processes]:
     svc = Processes(tmp_path_factory.mktemp("dash"))
     svc.start()
     try:
@@ -180,8 +171,8 @@ def js_errors() -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def page(browser_kit, service: Processes, js_errors: list[str]):
-    with browser_kit.sync_playwright() as pw:
+def page(playwright_api, service: Processes, js_errors: list[str]):
+    with playwright_api.sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
         context = browser.new_context(viewport={"width": 1280, "height": 900}, base_url=service.base)
         pg = context.new_page()

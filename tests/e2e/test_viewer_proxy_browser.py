@@ -26,12 +26,10 @@ import pytest
 
 from storage.artifacts import ArtifactStore
 from tests.backend.api.data import tar_gz, write_sequence
+from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
 from tests.webui.test_viewer import write_run
 
 ROOT = Path(__file__).resolve().parents[2]
-CHROMIUM = os.environ.get("VTD_TEST_CHROMIUM", "/usr/bin/chromium")
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--enable-unsafe-swiftshader"]
 HOST = "127.0.0.2"
 START_TIMEOUT_S = 60
 SCENE_TIMEOUT_MS = 60_000  # viser's first scene messages; SwiftShader and a shared CPU are slow
@@ -99,14 +97,6 @@ class Service:
     def tail(self) -> str:
         self.log.flush()
         return (self.tmp / "service.log").read_text(errors="replace")[-5000:]
-
-
-@pytest.fixture(scope="module")
-def playwright_api():
-    api = pytest.importorskip("playwright.sync_api", reason="Playwright's Python package is not installed")
-    if not Path(CHROMIUM).exists():
-        pytest.skip(f"no Chromium at {CHROMIUM} (apt-get install chromium)")
-    return api
 
 
 @pytest.fixture(scope="module")
