@@ -15,34 +15,37 @@ import numpy as np
 from worker.slam.map.keyframe import KeyFrame
 
 
-def visibility_votes(xyz: np.ndarray, kf: KeyFrame, K_small: np.ndarray, rel_tol: float,
+def visibility_votes(xyz_t: np.ndarray, kf: KeyFrame, K_small: np.ndarray, rel_tol: float,
                      min_tol_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """bool (M,) twice: `xyz` (M,3) world points this keyframe saw through (its measured depth lies behind
-    the point by more than the tolerance at every pixel of the 3x3 neighbourhood), and points it saw (depth
-    within the tolerance). The tolerance is `max(min_tol_m, rel_tol * depth)`; the neighbourhood keeps
-    points on silhouettes from counting as seen through when a pose is off by a pixel."""
+    """Indices into `xyz_t` (3,M) float32 world points (one row per axis: whole-row arithmetic is several
+    times faster than an (M,3) matmul here) twice: the points this keyframe saw through (its measured depth
+    lies behind the point by more than the tolerance at every pixel of the 3x3 neighbourhood), and the points
+    it saw (depth within the tolerance). The tolerance is `max(min_tol_m, rel_tol * depth)`; the
+    neighbourhood keeps points on silhouettes from counting as seen through when a pose is off by a pixel."""
     measured = kf.measured_small
     assert measured is not None
     h, w = measured.shape
-    R, t = kf.T_WC[:3, :3], kf.T_WC[:3, 3]
-    Pc = (xyz - t) @ R  # world -> camera: R^T (X - t), as row vectors
-    z = Pc[:, 2]
-    front = z > 0.1
-    u = np.full(len(xyz), -1, np.int64)
-    v = np.full(len(xyz), -1, np.int64)
-    u[front] = np.rint(K_small[0, 0] * Pc[front, 0] / z[front] + K_small[0, 2]).astype(np.int64)
-    v[front] = np.rint(K_small[1, 1] * Pc[front, 1] / z[front] + K_small[1, 2]).astype(np.int64)
-    inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    R = kf.T_WC[:3, :3].astype(np.float32)
+    o = kf.T_WC[:3, 3].astype(np.float32) @ R  # camera coordinates are R^T (X - t) = R^T X - R^T t
+
+    def axis(k: int) -> np.ndarray:
+        return R[0, k] * xyz_t[0] + R[1, k] * xyz_t[1] + R[2, k] * xyz_t[2] - o[k]
+
+    z = axis(2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = K_small[0, 0] * axis(0) / z + K_small[0, 2]
+        v = K_small[1, 1] * axis(1) / z + K_small[1, 2]
+    idx = np.flatnonzero((z > 0.1) & (u >= -0.5) & (u < w - 0.5) & (v >= -0.5) & (v < h - 0.5))
+    ui = (u[idx] + 0.5).astype(np.intp)  # nearest pixel (all values are >= -0.5 here)
+    vi = (v[idx] + 0.5).astype(np.intp)
+    zi = z[idx]
     nearest = cv2.erode(np.where(measured > 0, measured, np.float32(1e6)).astype(np.float32), np.ones((3, 3), np.uint8))
-    ui, vi, zi = u[inside], v[inside], z[inside]
     tol = np.maximum(min_tol_m, rel_tol * zi)
     d_near = nearest[vi, ui]
     d = measured[vi, ui]
-    through = np.zeros(len(xyz), bool)
-    seen = np.zeros(len(xyz), bool)
-    through[inside] = (d_near < 1e5) & (d_near > zi + tol)
-    seen[inside] = (d > 0) & (np.abs(d - zi) <= tol)
-    return through, seen
+    through = (d_near < 1e5) & (d_near > zi + tol)
+    seen = (d > 0) & (np.abs(d - zi) <= tol)
+    return idx[through], idx[seen]
 
 
 def carve(xyz: np.ndarray, rgb: np.ndarray, keyframes: list[KeyFrame], K: np.ndarray, stride: int,
@@ -56,12 +59,12 @@ def carve(xyz: np.ndarray, rgb: np.ndarray, keyframes: list[KeyFrame], K: np.nda
         return xyz, rgb
     K_small = K.astype(np.float64).copy()
     K_small[:2] /= stride
-    X = xyz.astype(np.float64)
-    n_through = np.zeros(len(X), np.int32)
-    n_seen = np.zeros(len(X), np.int32)
+    X_t = np.ascontiguousarray(xyz.T, dtype=np.float32)
+    n_through = np.zeros(len(xyz), np.int32)
+    n_seen = np.zeros(len(xyz), np.int32)
     for kf in kfs:
-        through, seen = visibility_votes(X, kf, K_small, rel_tol, min_tol_m)
-        n_through += through
-        n_seen += seen
+        through, seen = visibility_votes(X_t, kf, K_small, rel_tol, min_tol_m)
+        n_through[through] += 1  # indices are unique per keyframe
+        n_seen[seen] += 1
     keep = ~((n_through >= min_through) & (n_through > n_seen))
     return xyz[keep], rgb[keep]

@@ -124,3 +124,21 @@ def test_references_setting_is_checked():
     with pytest.raises(ConfigError, match="references"):
         get_preset("full", {"restoration.references": "sideways"})
     assert get_preset("full").section("restoration").references == "both-sided"
+
+
+
+def test_a_pnp_that_opencv_refuses_gives_no_pose_not_an_error(monkeypatch):
+    """SQPnP asserts (point_coordinate_variance) on some real samples (seen on an augmented 7-Scenes
+    sequence, deterministic for those inputs): that future frame gives no pose; the job goes on."""
+    import worker.slam.inpainting.lookahead as lookahead
+
+    seq, cfg = WallSequence(), LookaheadConfig()
+    extractor = OrbExtractor(get_preset("full").features)
+    tgt, fut = seq[TARGET], seq[TARGET + 4]
+    feats = [extractor.extract(cv2.cvtColor(f.rgb, cv2.COLOR_RGB2GRAY), f.depth) for f in (tgt, fut)]
+
+    def refuse(*_args, **_kwargs):
+        raise cv2.error("point_coordinate_variance >= POINT_VARIANCE_THRESHOLD")
+
+    monkeypatch.setattr(lookahead.cv2, "solvePnPRansac", refuse)
+    assert relative_pose_pnp(feats[0], ~person(TARGET), feats[1], K, cfg) is None
