@@ -25,8 +25,9 @@ from worker.slam.dynamic.epipolar import (
     match_orb,
     predict_positions,
 )
+from worker.slam.dynamic.object_motion import ObjectMotionConfig, estimate_object_motion
 from worker.slam.dynamic.segments import grow_by_depth, split_segments
-from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy
+from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy, object_threshold
 from worker.slam.features.depth import backproject
 from worker.slam.features.matching import hamming
 from worker.slam.features.search import KeypointIndex
@@ -37,6 +38,8 @@ class CullingConfig:
     """Dynamic culling of one frame against the previous one."""
 
     threshold: ThresholdConfig = field(default_factory=ThresholdConfig)
+    object_motion: ObjectMotionConfig = field(default_factory=ObjectMotionConfig)
+    """The per-segment motion estimate behind Δd in `threshold.mode: object`."""
     use_segmentation: bool = True
     """False = the `geometry-only` preset: no segments, only clusters of moving points."""
     detect_unknown: bool = False
@@ -144,6 +147,11 @@ class SegmentDecision:
     points: int
     score: float
     dynamic: bool
+    threshold_px: float = 0.0
+    """The Δd it was judged against."""
+    object_level: bool = False
+    """True when Δd came from the segment's own motion estimate (`threshold.mode: object`), False when from
+    the frame's (frame mode, or too few points with depth on the segment)."""
 
 
 @dataclass(frozen=True)
@@ -249,8 +257,9 @@ def _veto_pose(X, p_cur, has, K, T_init, config) -> np.ndarray:
     return T
 
 
-def _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr, config) -> np.ndarray:
-    """`dynamic` (H, W) with the static-looking parts of large dynamic segments kept (see `local_px`)."""
+def _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr_label, config) -> np.ndarray:
+    """`dynamic` (H, W) with the static-looking parts of large dynamic segments kept (see `local_px`);
+    `thr_label` (L+1,) is each segment's Δd."""
     h, w = labels.shape
     s = config.local_step_px
     gy, gx = np.mgrid[s // 2:h:s, s // 2:w:s]  # a coarse pixel grid, decided then spread to its cells
@@ -272,7 +281,7 @@ def _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores,
         # only towards "static": a few bad matches among a moving object's points must not keep it, but k
         # nearby points that all agree with the static scene are not on it (one-way: a small moving part of a
         # segment judged static is not looked for; k points are a weaker test than the whole segment's)
-        keep = (dist[:, -1] <= config.local_px) & (np.median(scores[on][idx], axis=1) <= thr)
+        keep = (dist[:, -1] <= config.local_px) & (np.median(scores[on][idx], axis=1) <= thr_label[lab])
         if not keep.any():
             continue
         flag = np.zeros(cell.shape, bool)
@@ -371,13 +380,27 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     decisions = []
     n_labels = int(labels.max())
     moving_label = np.zeros(n_labels + 1, bool)
+    thr_label = np.full(n_labels + 1, thr)
+    object_level = config.threshold.mode == "object" and prev_depth is not None and K is not None
+    z_prev = prev_depth[_pixel(p_prev[:, 1], prev_depth.shape[0]), _pixel(p_prev[:, 0], prev_depth.shape[1])] \
+        if object_level and prev_depth is not None else None
     for lab in range(1, n_labels + 1):
-        s = scores[point_label == lab]
+        on = point_label == lab
+        s = scores[on]
+        by_object = False
+        if z_prev is not None and K is not None:
+            sel = on & (z_prev > 0)
+            motion = estimate_object_motion(backproject(p_prev[sel], z_prev[sel], K), p_cur[sel], K, T_cur_prev,
+                                            config.object_motion)
+            if motion is not None:
+                thr_label[lab] = object_threshold(motion.cov, config.threshold)[0]
+                by_object = True
         if len(s) < config.min_points:
             moving = config.undecided_dynamic
         else:
-            moving = float(np.quantile(s, config.segment_quantile)) > thr
-        decisions.append(SegmentDecision(lab, "semantic", len(s), float(np.median(s)) if len(s) else 0.0, moving))
+            moving = float(np.quantile(s, config.segment_quantile)) > thr_label[lab]
+        decisions.append(SegmentDecision(lab, "semantic", len(s), float(np.median(s)) if len(s) else 0.0, moving,
+                                         float(thr_label[lab]), by_object))
         moving_label[lab] = moving
     if config.grow_px > 0 and moving_label.any():
         # the grown pixels join their segment, so the local decisions below judge them with its points
@@ -390,7 +413,7 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     # one pass over the image for all segments (none when nothing moves)
     dynamic = np.take(moving_label, labels) if moving_label.any() else np.zeros((h, w), bool)  # = moving_label[labels]
     if config.local_px > 0 and n_labels:
-        dynamic = _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr, config)
+        dynamic = _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr_label, config)
     exclude = dilate_disc(dynamic, config.dilation_px)
     if config.detect_unknown or not use_sem:
         moving_pts = scores > thr
@@ -399,7 +422,8 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
                                                        config)):
             inside = region[yi, xi]
             decisions.append(SegmentDecision(-(k + 1), "geometric", int(inside.sum()),
-                                             float(np.median(scores[inside])) if inside.any() else 0.0, True))
+                                             float(np.median(scores[inside])) if inside.any() else 0.0, True,
+                                             thr))
             clusters |= region
         dynamic |= clusters
         exclude |= dilate_disc(clusters, config.cluster_dilation_px)

@@ -136,7 +136,8 @@ class CullingStage:
             inputs.dynamic_mask = res.dynamic_mask
             inputs.info.update(dynamic_fraction=float(res.dynamic_mask.mean()), threshold_px=res.threshold_px,
                                dynamic_segments=sum(s.dynamic for s in res.segments),
-                               segments=len(res.segments))
+                               segments=len(res.segments),
+                               object_thresholds=sum(s.object_level for s in res.segments))
             if res.entropy is not None:
                 inputs.info["motion_entropy"] = res.entropy
             if self.scores is not None and ctx.truth is not None and frame.index < len(ctx.truth):
