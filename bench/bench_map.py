@@ -80,7 +80,7 @@ def check(seq_dir: Path, camera: str, run: Path) -> dict:
     kf_frames = {int(i) for i in np.flatnonzero(np.isin(np.round(traj.timestamps, 6), np.round(kf_stamps, 6)))}
     metrics = json.loads((run / "metrics.json").read_text())
     known = near is not None and off_static is not None and len(xyz) > 0
-    out = {"points": int(len(xyz)), "near_people": float(near.mean()) if known else None,  # type: ignore[union-attr]
+    out = {"map_points": int(len(xyz)), "near_people": float(near.mean()) if known else None,  # type: ignore[union-attr]
            "on_people": float((near & off_static).mean()) if known else None,  # type: ignore[operator]
            "ate": (metrics.get("ate") or {}).get("rmse"), "dense_ms": (metrics.get("timings_ms") or {}).get("dense")}
     out.update(map_check(seq, traj, xyz, kf_frames, 0))
@@ -117,7 +117,7 @@ def main() -> None:
         med = "-" if r.get("median_m_gt") is None else f"{r['median_m_gt']:.4f}"
         w5 = "-" if r.get("within_5cm_gt") is None else f"{r['within_5cm_gt']:.3f}"
         ate = "-" if r["ate"] is None else f"{r['ate']:.4f}"
-        print(f"| {name} | {method} | {r['points']} | {share} | {on} | {med} | {w5} | {ate} | {r['dense_ms']} |")
+        print(f"| {name} | {method} | {r['map_points']} | {share} | {on} | {med} | {w5} | {ate} | {r['dense_ms']} |")
 
 
 if __name__ == "__main__":
