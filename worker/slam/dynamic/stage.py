@@ -97,6 +97,8 @@ class CullingStage:
         self.scores: TruthScores | None = None
         self.removed_total = self.kept_total = self.readmitted_total = 0
         self.compared = self.guided = 0
+        # semantic segments judged, and how many of them against their own (object-level) Δd
+        self.segments_judged = self.object_thresholds = 0
         # Wall time of cull_frame alone (the stage also extracts the frame's ORB, which tracking needs anyway).
         # Not process CPU time: OpenCV's worker threads spin on an idle core and would inflate it.
         self.decision_ms: list[float] = []
@@ -131,6 +133,8 @@ class CullingStage:
             removed = self._readmit(removed, feats.uv, res.dynamic_mask, inputs.info)
             self.compared += 1
             self.guided += res.guided
+            self.segments_judged += sum(s.kind == "semantic" for s in res.segments)
+            self.object_thresholds += sum(s.object_level for s in res.segments)
             self.last = res
             inputs.exclude_mask = res.exclude_mask
             inputs.dynamic_mask = res.dynamic_mask
@@ -171,6 +175,7 @@ class CullingStage:
         out: dict = {"features_removed": self.removed_total, "features_kept": self.kept_total,
                "features_readmitted": self.readmitted_total,
                "frames_compared": self.compared, "guided_matching_frames": self.guided,
+               "segments_judged": self.segments_judged, "object_level_thresholds": self.object_thresholds,
                "decision_ms_median": float(np.median(self.decision_ms)) if self.decision_ms else None}
         if self.scores is not None:
             out["truth"] = {k: v for k, v in self.scores.summary().items() if k != "restoration_psnr"}
