@@ -13,6 +13,7 @@ import typer
 def register(app: typer.Typer) -> None:
     app.command("train-msnet")(train_command)
     app.command("eval-msnet")(eval_command)
+    app.command("export-msnet")(export_command)
 
 
 def _shared_default() -> str:
@@ -52,6 +53,27 @@ def train_command(
         export.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(weights, export)
     typer.echo(f"weights: {export or weights}")
+
+
+def export_command(
+    src: Annotated[Path, typer.Argument(help="A trained checkpoint (a run's msnet.pt).")],
+    dest: Annotated[Path, typer.Argument(help="Where to write it (e.g. worker/slam/segmentation/weights/"
+                                              "msnet_default.pt).")],
+    dynamic_classes: Annotated[str | None, typer.Option(
+        help="Comma-separated classes the pipeline treats as potentially dynamic (default: as trained). A class "
+             "without held-out IoU >= 0.5 on real images is not shipped as dynamic (MODEL_CARD.md).")] = None,
+    note: Annotated[str, typer.Option(help="Why, recorded in the checkpoint's metadata.")] = "",
+) -> None:
+    """Copy a trained MSNET checkpoint, optionally narrowing its potentially dynamic classes."""
+    from worker.slam.errors import ConfigError
+    from worker.slam.segmentation.msnet.checkpoint import export_model
+
+    classes = tuple(c.strip() for c in dynamic_classes.split(",") if c.strip()) if dynamic_classes else None
+    try:
+        export_model(src, dest, classes, note)
+    except ConfigError as exc:
+        raise typer.BadParameter(exc.message) from exc
+    typer.echo(f"weights: {dest}" + (f" (potentially dynamic: {', '.join(classes)})" if classes else ""))
 
 
 def eval_command(

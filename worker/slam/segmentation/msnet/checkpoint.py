@@ -1,6 +1,7 @@
 """Saving and loading MSNET checkpoints: config + weights + free-form metadata in one torch file."""
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import torch
@@ -37,3 +38,15 @@ def load_model(path: Path | None = None, device: str | torch.device = "cpu") -> 
     model = build_msnet(MsnetConfig.from_dict(data["config"]))
     model.load_state_dict(data["state_dict"])
     return model.to(device).eval(), data.get("meta", {})
+
+
+def export_model(src: Path, dest: Path, dynamic_classes: tuple[str, ...] | None = None, note: str = "") -> dict:
+    """Copy a trained checkpoint to `dest` (e.g. the shipped `msnet_default.pt`), optionally narrowing the classes
+    the SLAM pipeline treats as potentially dynamic: a class the network still predicts but that has not earned
+    its place (held-out IoU too low) is then left to the static scene. Returns the written metadata."""
+    model, meta = load_model(src)
+    if dynamic_classes is not None:
+        model.cfg = replace(model.cfg, dynamic_classes=tuple(dynamic_classes))  # validated by MsnetConfig
+    meta = {**meta, "exported_from": str(src), **({"export_note": note} if note else {})}
+    save_model(dest, model, meta)
+    return meta
