@@ -63,6 +63,9 @@ class Sequence(Base):
     meta: Mapped[dict[str, Any]] = mapped_column(default=dict)
     # SHA-256 of the uploaded archive as it arrived: a second upload of the same file is refused (409).
     content_sha256: Mapped[str | None] = mapped_column(String(64), index=True)
+    # The same hash on the one sequence that holds the archive against duplicates (NULL on copies added
+    # with allow_duplicate): unique, so two uploads of one archive racing past the look-up cannot both land.
+    claimed_sha256: Mapped[str | None] = mapped_column(String(64), index=True, unique=True)
 
     # The database cascades the delete (passive_deletes): no job rows are loaded to remove them.
     jobs: Mapped[list[Job]] = relationship(

@@ -18,7 +18,7 @@ from backend.api.errors import error_responses
 from backend.api.guard import GuardedRoute
 from backend.api.schemas import Page, SequenceId, SequenceImport, SequenceOut
 from backend.api.upload import receive_upload
-from storage.errors import Conflict, InvalidInput, NotFound
+from storage.errors import InvalidInput, NotFound
 from storage.ingest import ingest_staged, register_folder, upload_limits
 from storage.ingest.archive import remove_tree
 from storage.ingest.stream import ArchiveSink
@@ -76,11 +76,7 @@ def _refuse_duplicate(session: Session, sha256: str) -> None:
     """A :class:`Conflict` naming the sequence this very archive already made, if there is one."""
     existing = sequences.find_by_content(session, sha256)
     if existing is not None:
-        raise Conflict(
-            f'this archive was already uploaded as "{existing.name}" (sequence {existing.id}); '
-            "send allow_duplicate=true to add it again",
-            {"existing_id": existing.id, "existing_name": existing.name, "sha256": sha256},
-        )
+        raise sequences.duplicate_upload(existing, sha256)
 
 
 def _default_name(filename: str | None) -> str:
@@ -114,12 +110,13 @@ async def upload_sequence(
             raise InvalidInput("the form needs a 'camera' field (a preset name or JSON intrinsics)")
         camera = parse_camera_spec(form.fields["camera"])
         name = (form.fields.get("name") or "").strip()[:255] or _default_name(form.filename)
-        if not _flag(form.fields, "allow_duplicate"):
+        unique = not _flag(form.fields, "allow_duplicate")
+        if unique:  # refused early here; the database refuses the one that raced past (same 409)
             await run_in_threadpool(_refuse_duplicate, session, form.sha256)
         with anyio.CancelScope(shield=True):  # once the body is in, finish even if the client leaves
             seq = await run_in_threadpool(
                 ingest_staged, session, store, settings, staging,
-                name=name, camera=camera, content_sha256=form.sha256,
+                name=name, camera=camera, content_sha256=form.sha256, unique=unique,
             )
     except BaseException:
         with anyio.CancelScope(shield=True):  # a disconnect cancels the request: clean up regardless

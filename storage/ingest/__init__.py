@@ -48,8 +48,11 @@ def ingest_staged(
     name: str,
     camera: dict[str, Any],
     content_sha256: str | None = None,
+    unique: bool = False,
 ) -> Sequence:
     """Validate, install and record an upload in the staging folder ``staging``.
+
+    ``unique``: refuse (:class:`Conflict`) when another sequence already holds ``content_sha256``.
 
     ``staging`` holds ``archive`` (unpacked here into ``unpacked``) or, when the upload was unpacked
     while it streamed in (:class:`storage.ingest.stream.ArchiveSink`), ``unpacked`` already.
@@ -69,7 +72,7 @@ def ingest_staged(
         installed = store.install_sequence(root, seq_id)
         return _record(
             session, store, seq_id, installed, info,
-            name=name, camera=camera, source="upload", content_sha256=content_sha256,
+            name=name, camera=camera, source="upload", content_sha256=content_sha256, claim=unique,
         )
     except BaseException:
         if installed is not None:
@@ -141,6 +144,7 @@ def _record(
     camera: dict[str, Any],
     source: str,
     content_sha256: str | None = None,
+    claim: bool = False,
 ) -> Sequence:
     try:
         return sequences.create(
@@ -155,6 +159,7 @@ def _record(
             size_bytes=info.size_bytes,
             meta={**info.meta(), "source": source},
             content_sha256=content_sha256,
+            claim=claim,
         )
     except StorageError:
         raise

@@ -6,8 +6,10 @@ from typing import Any
 
 from sqlalchemy import delete as sql_delete
 from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
+from storage.errors import Conflict
 from storage.models import Job, Sequence, new_id
 from storage.repositories._common import check_page, get_or_raise, writing
 
@@ -25,8 +27,14 @@ def create(
     meta: dict[str, Any] | None = None,
     id: str | None = None,
     content_sha256: str | None = None,
+    claim: bool = False,
 ) -> Sequence:
-    """Record a sequence already in place; ``id`` may be chosen first to name its directory."""
+    """Record a sequence already in place; ``id`` may be chosen first to name its directory.
+
+    ``claim``: this sequence holds ``content_sha256`` against duplicates; if another already holds it
+    (an upload of the same archive that committed first), nothing is recorded and a :class:`Conflict`
+    names that one.
+    """
     seq = Sequence(
         id=id or new_id(),
         name=name,
@@ -38,10 +46,30 @@ def create(
         size_bytes=size_bytes,
         meta=meta or {},
         content_sha256=content_sha256,
+        claimed_sha256=content_sha256 if claim else None,
     )
-    with writing(session):
-        session.add(seq)
+    try:
+        with writing(session):
+            session.add(seq)
+    except IntegrityError:
+        holder = _claimant(session, content_sha256) if claim and content_sha256 else None
+        if holder is None:  # another constraint refused the row
+            raise
+        raise duplicate_upload(holder, holder.claimed_sha256 or "") from None
     return seq
+
+
+def duplicate_upload(existing: Sequence, sha256: str) -> Conflict:
+    """The 409 for an archive already uploaded as ``existing``."""
+    return Conflict(
+        f'this archive was already uploaded as "{existing.name}" (sequence {existing.id}); '
+        "send allow_duplicate=true to add it again",
+        {"existing_id": existing.id, "existing_name": existing.name, "sha256": sha256},
+    )
+
+
+def _claimant(session: Session, sha256: str) -> Sequence | None:
+    return session.scalars(select(Sequence).where(Sequence.claimed_sha256 == sha256)).first()
 
 
 def get(session: Session, sequence_id: str) -> Sequence:

@@ -58,7 +58,7 @@ def test_bad_url() -> None:
 def test_migrations_create_all_tables(engine: Engine) -> None:
     assert TABLES <= set(inspect(engine).get_table_names())
     with engine.connect() as conn:
-        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0004_sequence_content_hash"
+        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0005_sequence_content_claim"
 
 
 def test_migrations_match_models(engine: Engine) -> None:
@@ -132,3 +132,21 @@ def test_migrations_dir_is_inside_package() -> None:
 
 def test_session_factory_binds_engine(engine: Engine) -> None:
     assert make_session_factory(engine)().get_bind() is engine
+
+
+def test_0005_gives_each_archive_to_its_oldest_upload(engine: Engine) -> None:
+    """Copies already added with allow_duplicate keep no claim, so the unique index can be built."""
+    with engine.begin() as conn:
+        command.downgrade(alembic_config(conn), "0004_sequence_content_hash")
+        for sid, sha, created in [("b", "x" * 64, "2026-01-02"), ("a", "x" * 64, "2026-01-01"),
+                                  ("c", "y" * 64, "2026-01-01"), ("d", None, "2026-01-01")]:
+            conn.execute(
+                text("INSERT INTO sequences (id, name, path, frames, duration_s, has_groundtruth, camera,"
+                     " created_at, size_bytes, meta, content_sha256) VALUES (:id, :id, :id, 0, 0, false,"
+                     " '{}', :created, 0, '{}', :sha)"),
+                {"id": sid, "sha": sha, "created": created},
+            )
+    init_db(engine)
+    with engine.connect() as conn:
+        rows = conn.execute(text("SELECT id, claimed_sha256 FROM sequences ORDER BY id")).all()
+    assert [tuple(r) for r in rows] == [("a", "x" * 64), ("b", None), ("c", "y" * 64), ("d", None)]

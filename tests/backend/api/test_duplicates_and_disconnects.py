@@ -1,7 +1,11 @@
 """An archive uploaded twice is a 409 naming the first sequence (unless forced); an upload the client
-abandons half-way leaves neither files nor a row; sequences carry their newest job."""
+abandons half-way leaves neither files nor a row; two uploads of one archive at once: one 201, one 409;
+sequences carry their newest job."""
 from __future__ import annotations
 
+import contextlib
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -10,9 +14,10 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from storage.settings import Settings
+from storage.settings import Settings, get_settings
 from tests.backend.api.conftest import leftovers, upload
 from tests.backend.api.data import zip_of
+from tests.backend.api.pg import pg_schema_url
 
 BOUNDARY = "vtd-test-boundary"
 
@@ -113,3 +118,36 @@ def test_sequences_carry_their_newest_job(client, seq_tgz):
     listed = client.get("/api/v1/sequences").json()["items"][0]["latest_job"]
     assert listed["id"] == newest["id"] and listed["preset"] == "geometry-only" and listed["status"] == "queued"
     assert client.get(f"/api/v1/sequences/{seq['id']}").json()["latest_job"]["id"] == newest["id"]
+
+
+@pytest.mark.parametrize("database", ["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
+def test_two_uploads_of_one_archive_racing_past_the_check_one_is_409(
+    settings: Settings, seq_tgz: bytes, monkeypatch: pytest.MonkeyPatch, database: str
+) -> None:
+    """Both requests pass the look-up before either records its row: the database decides."""
+    import backend.api.sequences as routes
+
+    real = routes.ingest_staged
+    barrier = threading.Barrier(2)
+
+    def ingest_after_both_checked(*args: Any, **kwargs: Any) -> Any:
+        barrier.wait(30)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(routes, "ingest_staged", ingest_after_both_checked)
+    with contextlib.ExitStack() as stack:
+        if database == "postgresql":
+            url = stack.enter_context(pg_schema_url())
+            settings = get_settings(data_dir=settings.data_dir, database_url=url)
+        client = stack.enter_context(TestClient(create_app(settings, enqueue=lambda job_id: None)))
+        with ThreadPoolExecutor(2) as pool:
+            answers = list(pool.map(lambda n: upload(client, seq_tgz, name=n), ["a", "b"]))
+        assert sorted(r.status_code for r in answers) == [201, 409], [r.text for r in answers]
+        won = next(r for r in answers if r.status_code == 201).json()
+        err = next(r for r in answers if r.status_code == 409).json()["error"]
+        assert err["code"] == "conflict" and won["id"] in err["message"] and "allow_duplicate" in err["message"]
+        assert err["detail"] == {"existing_id": won["id"], "existing_name": won["name"],
+                                 "sha256": won["content_sha256"]}
+        assert [s["id"] for s in client.get("/api/v1/sequences").json()["items"]] == [won["id"]]
+        assert {Path(p).parts[:2] for p in leftovers(settings)} == {("sequences", won["id"])}
+        assert not list((settings.data_dir / "staging").iterdir())
