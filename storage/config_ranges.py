@@ -26,10 +26,13 @@ def settings_ranges() -> dict[str, dict[str, Any]]:
 
 def check_ranges(config: dict[str, Any]) -> None:
     """Every setting in ``config`` (nested or dotted overrides) of a known section exists, and a ranged
-    one has the right type and lies in its range; :class:`InvalidInput` naming the field and the range."""
+    one has the right type and lies in its range; :class:`InvalidInput` naming the field and the range.
+    Then the ordered pairs (``below``/``at_most``: a minimum depth under the maximum), each side the
+    override or else the default (presets differ only in their stages), naming both fields."""
     ranges = settings_ranges()
     sections = {key.split(".", 1)[0] for key in ranges}
-    for key, value in _flatten(config):
+    flat = _flatten(config)
+    for key, value in flat:
         if key.split(".", 1)[0] not in sections:
             continue  # not a settings section (name, stages) or one the worker checks itself
         spec = ranges.get(key)
@@ -46,6 +49,22 @@ def check_ranges(config: dict[str, Any]) -> None:
                                f"within {lo}..{hi}", detail)
         if not lo <= value <= hi:
             raise InvalidInput(f"config {key} must be within {lo}..{hi}, got {value!r}", detail)
+    _check_pairs(ranges, dict(flat))
+
+
+_PAIRS = (("below", "below", lambda lo, hi: lo < hi), ("at_most", "at most", lambda lo, hi: lo <= hi))
+
+
+def _check_pairs(ranges: dict[str, dict[str, Any]], given: dict[str, Any]) -> None:
+    for lo_key, spec in ranges.items():
+        for rel, words, ok in _PAIRS:
+            hi_key = spec.get(rel)
+            if hi_key is None or (lo_key not in given and hi_key not in given):
+                continue
+            lo, hi = given.get(lo_key, spec["default"]), given.get(hi_key, ranges[hi_key]["default"])
+            if not ok(lo, hi):
+                raise InvalidInput(f"config {lo_key} ({lo!r}) must be {words} {hi_key} ({hi!r})",
+                                   {"field": lo_key, "fields": [lo_key, hi_key], "values": [lo, hi]})
 
 
 def _prefixes(key: str) -> list[str]:

@@ -16,12 +16,19 @@ from typing import Any
 from worker.slam.errors import ConfigError
 
 
-def valid(default: Any, lo: float, hi: float) -> Any:
+def valid(default: Any, lo: float, hi: float, *, below: str | None = None, at_most: str | None = None) -> Any:
     """A numeric field's default and its documented valid range ``lo..hi`` (inclusive), checked on every
     override by :func:`_apply` and published for the api in ``formats/settings_ranges.json``
     (``worker.slam.ranges``): a value outside it never reaches a native library (``n_levels: 0``
-    segfaulted OpenCV's ORB)."""
-    return field(default=default, metadata={"range": (lo, hi)})
+    segfaulted OpenCV's ORB).
+
+    ``below``/``at_most`` name the sibling field that bounds this one from above (``<`` / ``<=``): the lower
+    end of a pair whose ranges each hold but contradict each other (a minimum depth above the maximum)."""
+    meta: dict[str, Any] = {"range": (lo, hi)}
+    for key, other in (("below", below), ("at_most", at_most)):
+        if other is not None:
+            meta[key] = other
+    return field(default=default, metadata=meta)
 
 
 @dataclass
@@ -36,7 +43,7 @@ class FeatureConfig:
     """FAST threshold; low, so weakly textured grid cells still get corners (the grid keeps the best)."""
     grid_cell_px: int = valid(40, 4, 1_024)
     """Side of the grid cells that balance keypoints across the image."""
-    min_depth_m: float = valid(0.1, 0.0, 100.0)
+    min_depth_m: float = valid(0.1, 0.0, 100.0, below="max_depth_m")
     """Depth below this is treated as invalid."""
     max_depth_m: float = valid(6.0, 0.01, 1000.0)
     """Depth above this is treated as invalid (noisy far range)."""
@@ -70,7 +77,7 @@ class TrackingConfig:
     """Covisible keyframes whose points form the local map."""
     keyframe_max_frames: int = valid(20, 1, 100_000)
     """Insert a keyframe at least this often (frames)."""
-    keyframe_min_frames: int = valid(0, 0, 100_000)
+    keyframe_min_frames: int = valid(0, 0, 100_000, at_most="keyframe_max_frames")
     """Never insert keyframes closer than this (frames)."""
     keyframe_ratio: float = valid(0.75, 0.0, 1.0)
     """Insert a keyframe when the tracked points fall below this fraction of the reference keyframe's."""
@@ -283,18 +290,38 @@ def _apply(obj: Any, values: dict, where: str) -> Any:
             changes[key] = _in_range(fields[key], _coerce(cur, val, f"{where}.{key}"), f"{where}.{key}")
     if type(obj).__dataclass_params__.frozen:
         try:
-            return dataclasses.replace(obj, **changes)  # runs the section's own checks (__post_init__)
+            obj = dataclasses.replace(obj, **changes)  # runs the section's own checks (__post_init__)
         except ValueError as exc:
             raise ConfigError(f"invalid value in {where}: {exc}", detail={"field": where}) from exc
-    for key, val in changes.items():
-        setattr(obj, key, val)
-    check = getattr(obj, "__post_init__", None)
-    if check is not None and changes:
-        try:
-            check()
-        except ValueError as exc:
-            raise ConfigError(f"invalid value in {where}: {exc}", detail={"field": where}) from exc
+    else:
+        for key, val in changes.items():
+            setattr(obj, key, val)
+        check = getattr(obj, "__post_init__", None)
+        if check is not None and changes:
+            try:
+                check()
+            except ValueError as exc:
+                raise ConfigError(f"invalid value in {where}: {exc}", detail={"field": where}) from exc
+    _check_pairs(obj, where)
     return obj
+
+
+_PAIRS = (("below", "below", lambda lo, hi: lo < hi), ("at_most", "at most", lambda lo, hi: lo <= hi))
+
+
+def _check_pairs(obj: Any, where: str) -> None:
+    """Each ``below``/``at_most`` pair of ``obj`` (see :func:`valid`) in order, else a :class:`ConfigError`
+    naming both fields (the api's ``storage.config_ranges`` says the same from the published ranges)."""
+    for f in dataclasses.fields(obj):
+        for key, words, ok in _PAIRS:
+            other = f.metadata.get(key)
+            if other is None:
+                continue
+            lo, hi = getattr(obj, f.name), getattr(obj, other)
+            if not ok(lo, hi):
+                lo_key, hi_key = f"{where}.{f.name}", f"{where}.{other}"
+                raise ConfigError(f"{lo_key} ({lo!r}) must be {words} {hi_key} ({hi!r})",
+                                  detail={"field": lo_key, "fields": [lo_key, hi_key], "values": [lo, hi]})
 
 
 def _in_range(f: dataclasses.Field, val: Any, where: str) -> Any:

@@ -43,6 +43,9 @@ def _walk(obj: Any, prefix: str, out: dict[str, dict[str, Any]]) -> None:
         bounds = f.metadata.get("range")
         if bounds is not None:
             entry["min"], entry["max"] = bounds
+        for rel in ("below", "at_most"):  # the field that bounds this one (storage.config_ranges checks it)
+            if rel in f.metadata:
+                entry[rel] = f"{prefix}.{f.metadata[rel]}"
         out[key] = entry
 
 

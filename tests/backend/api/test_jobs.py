@@ -83,6 +83,25 @@ def test_bad_job_requests_leave_no_job(client, queue, seq_id, body, status, code
     assert client.get("/api/v1/jobs").json()["total"] == 0 and queue.ids == []
 
 
+@pytest.mark.parametrize("config, fields", [
+    ({"features": {"min_depth_m": 7.0}}, ("features.min_depth_m", "features.max_depth_m")),
+    ({"tracking.keyframe_min_frames": 30, "tracking.keyframe_max_frames": 20},
+     ("tracking.keyframe_min_frames", "tracking.keyframe_max_frames")),
+    ({"culling": {"culling": {"threshold": {"d_min": 5.0, "d_max": 4.0}}}},
+     ("culling.culling.threshold.d_min", "culling.culling.threshold.d_max")),
+    ({"restoration.selection.max_refs": 1}, ("restoration.selection.min_refs", "restoration.selection.max_refs")),
+])
+def test_a_config_whose_ranges_contradict_each_other_is_422_naming_both(client, queue, seq_id, config, fields):
+    for path, body in (("/api/v1/jobs", {"sequence_id": seq_id, "preset": "full", "config": config}),
+                       ("/api/v1/batches", {"sequence_ids": [seq_id], "presets": ["full"], "config": config})):
+        r = client.post(path, json=body)
+        assert r.status_code == 422, r.text
+        err = r.json()["error"]
+        assert err["code"] == "invalid_input" and all(f in err["message"] for f in fields), err
+        assert err["detail"]["fields"] == list(fields)
+    assert client.get("/api/v1/jobs").json()["total"] == 0 and queue.ids == []
+
+
 def test_queue_down_is_503_and_the_job_is_failed_not_stuck(client, queue, seq_id):
     queue.fail = True
     r = client.post("/api/v1/jobs", json={"sequence_id": seq_id, "preset": "orb-only"})

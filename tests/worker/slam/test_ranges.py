@@ -1,6 +1,8 @@
 """Every core setting has a valid range, checked by the worker and published for the api: the committed
 formats/settings_ranges.json is what the config declares, and a setting that crashed a native library
-(features.n_levels: 0 segfaulted ORB) is refused with the field and the range, in a subprocess that lives."""
+(features.n_levels: 0 segfaulted ORB) is refused with the field and the range, in a subprocess that lives.
+Pairs whose ranges each hold but contradict each other (a minimum depth above the maximum) are refused by
+both, naming both fields."""
 from __future__ import annotations
 
 import subprocess
@@ -40,9 +42,10 @@ def test_worker_and_api_refuse_the_same_out_of_range_values(key: str) -> None:
             PipelineConfig().with_overrides({key: bad})
         with pytest.raises(InvalidInput, match=key.replace(".", r"\.")):
             check_ranges({key: bad})
-    for good in (spec["min"], spec["max"]):  # each bound alone (a field may also be checked against others)
-        check_ranges({key: good})
-        value = PipelineConfig().with_overrides({key: good}).to_dict()
+    for good in (spec["min"], spec["max"]):  # each bound, its pair's other side moved out of the way
+        given = {key: good, **_partner_at_its_bound(key, good == spec["max"])}
+        check_ranges(given)
+        value = PipelineConfig().with_overrides(given).to_dict()
     for part in key.split("."):
         value = value[part]
     assert value == good
@@ -72,3 +75,71 @@ def test_the_api_knows_every_setting_not_only_the_ranged_ones() -> None:
     assert "culling.culling.threshold.d_min" in settings_ranges()
     with pytest.raises(InvalidInput, match="unknown config field 'culling.nope'"):
         check_ranges({"culling.nope": 1})
+
+
+PAIRS = sorted((lo, spec.get("below") or spec["at_most"], "below" in spec)
+               for lo, spec in settings_ranges().items() if "below" in spec or "at_most" in spec)
+
+
+def _partner_at_its_bound(key: str, high: bool) -> dict[str, float]:
+    """The other side of ``key``'s ordered pair at its own extreme, so ``key`` at its bound is consistent."""
+    for lo, hi, _strict in PAIRS:
+        if key == lo and high:
+            return {hi: settings_ranges()[hi]["max"]}
+        if key == hi and not high:
+            return {lo: settings_ranges()[lo]["min"]}
+    return {}
+
+
+def test_the_ordered_pairs_are_published() -> None:
+    assert [(lo, hi) for lo, hi, _ in PAIRS] == [
+        ("culling.culling.threshold.d_min", "culling.culling.threshold.d_max"),
+        ("features.min_depth_m", "features.max_depth_m"),
+        ("restoration.selection.min_refs", "restoration.selection.max_refs"),
+        ("tracking.keyframe_min_frames", "tracking.keyframe_max_frames"),
+    ]
+
+
+@pytest.mark.parametrize(("lo", "hi", "strict"), PAIRS)
+def test_worker_and_api_refuse_pairs_that_contradict_each_other_naming_both(lo: str, hi: str,
+                                                                          strict: bool) -> None:
+    """Each value inside its own range, the pair out of order: one side given, the other its default, or
+    both given (nested or dotted)."""
+    default_lo, default_hi = settings_ranges()[lo]["default"], settings_ranges()[hi]["default"]
+    step = 1 if settings_ranges()[lo]["type"] == "int" else 0.5
+    head, _, field = lo.rpartition(".")
+    nested: dict = {field: default_hi + step, hi.rpartition(".")[2]: default_hi}
+    for part in reversed(head.split(".")):
+        nested = {part: nested}
+    hi_min = settings_ranges()[hi]["min"]
+    lowered = [{hi: hi_min}] if hi_min < default_lo else []  # only the maximum given, under the minimum
+    for bad in ({lo: default_hi + step}, *lowered, nested):
+        with pytest.raises(ConfigError) as worker:
+            PipelineConfig().with_overrides(bad)
+        with pytest.raises(InvalidInput) as api:
+            check_ranges(bad)
+        for err in (worker.value, api.value):
+            assert lo in err.message and hi in err.message, err.message
+            assert err.detail["fields"] == [lo, hi]
+    equal = {lo: default_hi}
+    if strict:
+        with pytest.raises(ConfigError, match="must be below"):
+            PipelineConfig().with_overrides(equal)
+        with pytest.raises(InvalidInput, match="must be below"):
+            check_ranges(equal)
+    else:
+        check_ranges(equal)
+        PipelineConfig().with_overrides(equal)
+    check_ranges({lo: default_lo, hi: default_hi})  # in order: both sides pass
+    PipelineConfig().with_overrides({hi: default_hi}).with_overrides({lo: default_lo})
+
+
+def test_a_pair_is_checked_on_the_whole_config_not_each_override_alone() -> None:
+    """A base that moved the maximum down refuses a minimum the defaults would take; a stored snapshot too."""
+    base = PipelineConfig().with_overrides({"features.max_depth_m": 2.0})
+    with pytest.raises(ConfigError, match=r"features\.min_depth_m \(3\.0\) must be below features\.max_depth_m"):
+        base.with_overrides({"features": {"min_depth_m": 3.0}})
+    snapshot = PipelineConfig().to_dict()
+    snapshot["tracking"]["keyframe_min_frames"] = snapshot["tracking"]["keyframe_max_frames"] + 1
+    with pytest.raises(ConfigError, match="keyframe_min_frames"):
+        PipelineConfig.from_dict(snapshot)

@@ -31,7 +31,7 @@ from worker.slam.config import valid
 class ThresholdConfig:
     """Parameters of f(H)."""
 
-    d_min: float = valid(1.5, 0.0, 100.0)
+    d_min: float = valid(1.5, 0.0, 100.0, at_most="d_max")
     """Lower bound of Δd in pixels (sub-pixel noise of ORB keypoints stays below it)."""
     d_max: float = valid(4.0, 0.0, 100.0)
     """Upper bound of Δd in pixels."""

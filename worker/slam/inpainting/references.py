@@ -21,7 +21,7 @@ class ReferenceSelectionConfig:
     """Motion test τ: camera displacement to the target."""
     min_rotation_deg: float = valid(0.5, 0.0, 180.0)
     """Motion test γ: camera rotation to the target."""
-    min_refs: int = valid(2, 1, 16)
+    min_refs: int = valid(2, 1, 16, at_most="max_refs")
     max_refs: int = valid(4, 1, 16)
     candidate_stride: int = valid(2, 1, 100)
     """Only every n-th frame of the window is a candidate: neighbours see nearly the same background, and the
