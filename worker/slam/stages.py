@@ -4,6 +4,9 @@ A stage (segmentation, dynamic culling, restoration) runs before tracking. It ge
 built so far and a `StageContext` -- a narrow, read-only view of the run (camera, config, predicted and last
 pose, the feature extractor, the sequence and its truth), never the tracker itself -- and returns updated
 `FrameInputs`; the pipeline hands their `track_inputs()` to the tracker.
+
+A stage may keep work off the tracking path with `prepare(frame)`: work on the frame alone, run ahead of the
+frame's turn on another thread; its result arrives in `FrameInputs.prepared`.
 """
 from __future__ import annotations
 
@@ -47,6 +50,9 @@ class FrameInputs:
     """bool (H,W): pixels judged moving (culling)."""
     previews: dict[str, np.ndarray] | None = None
     """RGB uint8 images worth saving for this frame (e.g. {'rgb', 'mask', 'restored'})."""
+    prepared: dict[str, object] = field(default_factory=dict)
+    """Results of stages' `prepare(frame)` computed ahead on another thread, by stage name; a stage whose entry
+    is missing (or None) computes the same in `process`."""
 
     def track_inputs(self) -> TrackInputs:
         """The part the tracker reads."""
@@ -87,7 +93,9 @@ class StageContext:
 
 class FrameStage(Protocol):
     """A per-frame stage. It may also define `summary() -> dict`: run-level figures that the pipeline stores in
-    metrics.json under the stage's name."""
+    metrics.json under the stage's name; and `prepare(frame) -> object`: work that depends on the frame alone
+    (pure, deterministic, never touching what `process` changes), which the pipeline may run ahead on another
+    thread and hands to `process` as `inputs.prepared[name]`."""
 
     name: str
 

@@ -73,14 +73,21 @@ class SegmentationStage:
         cfg: SegmentationStageConfig = config.section("segmentation")
         self.segmenter = make_segmenter(cfg.segmenter) if cfg.source == "network" else None
 
+    def prepare(self, frame: Frame) -> np.ndarray | None:
+        """The network's potentially dynamic pixels, bool (H,W): from the RGB alone, so the pipeline may run it
+        ahead on another thread. None for the truth source (read in `process`: it needs the run's truth)."""
+        return None if self.segmenter is None else self.segmenter.segment(frame.rgb).dynamic_mask()
+
     def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
+        mask = inputs.prepared.get(self.name)
         if self.segmenter is None:
             if ctx.truth is None:
                 raise SequenceFormatError("segmentation.source 'truth' needs a sequence with truth/ masks",
                                           path=ctx.sequence.root if ctx.sequence is not None else None)
             mask = ctx.truth.mask(frame.index)
-        else:
-            mask = self.segmenter.segment(frame.rgb).dynamic_mask()
+        elif mask is None:
+            mask = self.prepare(frame)
+        assert isinstance(mask, np.ndarray)
         inputs.potentially_dynamic = mask
         inputs.info["potentially_dynamic_fraction"] = float(mask.mean())
         return inputs

@@ -11,31 +11,33 @@ import queue
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from types import TracebackType
-
-from worker.slam.io.sequence import Frame
+from typing import Generic, TypeVar
 
 _POLL_S = 0.05
 """How often a blocked reader checks whether it should stop (the consumer may have gone away)."""
 
+T = TypeVar("T")
+"""What `read(i)` gives: a `Frame`, or a frame with work queued on it (`prepare_ahead.Prepared`)."""
 
-class ReadAhead:
+
+class ReadAhead(Generic[T]):
     """Iterates `read(i)` for i in `indices`, decoding up to `depth` frames ahead on one thread.
 
     `depth` 0 reads synchronously on the caller's thread (no thread at all). Use as a context manager, so an
     exception or cancellation in the consumer stops the reader thread.
     """
 
-    def __init__(self, read: Callable[[int], Frame], indices: Sequence[int], depth: int = 2) -> None:
+    def __init__(self, read: Callable[[int], T], indices: Sequence[int], depth: int = 2) -> None:
         if depth < 0:
             raise ValueError(f"read-ahead depth must be >= 0, got {depth}")
         self._read = read
         self._indices = indices
         self._depth = depth
-        self._queue: queue.Queue[tuple[Frame | None, BaseException | None]] = queue.Queue(maxsize=max(1, depth))
+        self._queue: queue.Queue[tuple[T | None, BaseException | None]] = queue.Queue(maxsize=max(1, depth))
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
-    def __enter__(self) -> ReadAhead:
+    def __enter__(self) -> ReadAhead[T]:
         if self._depth > 0 and len(self._indices):
             self._thread = threading.Thread(target=self._produce, name="vtdslam-read-ahead", daemon=True)
             self._thread.start()
@@ -52,7 +54,7 @@ class ReadAhead:
             self._thread.join()
             self._thread = None
 
-    def __iter__(self) -> Iterator[Frame]:
+    def __iter__(self) -> Iterator[T]:
         if self._depth == 0:
             for i in self._indices:
                 yield self._read(i)
@@ -69,13 +71,13 @@ class ReadAhead:
     def _produce(self) -> None:
         for i in self._indices:
             try:
-                item: tuple[Frame | None, BaseException | None] = (self._read(i), None)
+                item: tuple[T | None, BaseException | None] = (self._read(i), None)
             except BaseException as exc:  # handed to the consumer at this frame, like a synchronous read
                 item = (None, exc)
             if not self._put(item) or item[1] is not None:
                 return
 
-    def _put(self, item: tuple[Frame | None, BaseException | None]) -> bool:
+    def _put(self, item: tuple[T | None, BaseException | None]) -> bool:
         """Blocks while the queue is full; False when asked to stop meanwhile."""
         while not self._stop.is_set():
             try:

@@ -1,0 +1,68 @@
+"""Per-frame work that depends on the frame alone, run on one background thread ahead of the frame's turn.
+
+A stage's `prepare(frame)` (segmentation: the network's mask from the RGB) needs nothing from earlier frames,
+so it can run while the pipeline thread culls and tracks the frame before; torch and OpenCV release the GIL,
+so on two cores the two overlap. One thread, fed in frame order: each result is what the pipeline thread
+would have computed (the same function on the same frame), and a model is never called by two threads at once.
+Each result comes with its compute time, so the pipeline reports the stage's cost and, apart from it, how long
+it waited for the result.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
+from types import TracebackType
+
+from worker.slam.io.sequence import Frame
+
+THREAD_NAME = "vtdslam-prepare"
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A frame with its pending results: futures of (result, compute ms) by name (empty: nothing ahead)."""
+
+    frame: Frame
+    pending: Mapping[str, Future[tuple[object, float]]] = field(default_factory=dict)
+
+
+def _timed(fn: Callable[[Frame], object], frame: Frame) -> tuple[object, float]:
+    t0 = time.perf_counter()
+    out = fn(frame)
+    return out, 1000 * (time.perf_counter() - t0)
+
+
+class PrepareAhead:
+    """`submit(frame)` queues every `prepare` function on the frame; with none, no thread is started.
+
+    Use as a context manager: leaving it cancels what has not started and waits for the one running (at most one
+    frame's work), so an error or a cancellation in the consumer stops the thread. Submitting is thread-safe
+    (the read-ahead thread submits the frames it has decoded).
+    """
+
+    def __init__(self, prepare: Mapping[str, Callable[[Frame], object]]) -> None:
+        self._prepare = dict(prepare)
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix=THREAD_NAME) if self._prepare else None
+
+    @property
+    def names(self) -> list[str]:
+        """What runs ahead, by name."""
+        return list(self._prepare)
+
+    def submit(self, frame: Frame) -> Prepared:
+        if self._pool is None:
+            return Prepared(frame)
+        return Prepared(frame, {name: self._pool.submit(_timed, fn, frame) for name, fn in self._prepare.items()})
+
+    def __enter__(self) -> PrepareAhead:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
