@@ -12,6 +12,10 @@ segmentation network) run ahead on another (`prepare_ahead`), so frame k+1 is se
 and tracked. Results are the same either way. `timings_ms[stage]` stays the stage's compute time per frame
 (wherever it ran); `timings_ms[stage + '_wait']` is what the pipeline thread waited for the prepared result, and
 `metrics['overlapped_stages']` names the stages that ran ahead.
+
+Deferred work: a stage whose output tracking does not read may leave it in `FrameInputs.deferred` (restoration
+on demand); it runs after tracking only when the frame became a keyframe or a preview is due, and its time is
+added to the stage's own entry for that frame.
 """
 from __future__ import annotations
 
@@ -139,6 +143,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
             t = timer("read", t)
             inputs = FrameInputs()
             ctx = _frame_context(run_ctx, tracker)
+            deferred_by = None  # the stage that left work for after tracking
             for st in stages:
                 ahead_ms = 0.0
                 pending = item.pending.get(st.name)
@@ -147,15 +152,20 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
                     t = timer(f"{st.name}_wait", t)
                 inputs = st.process(frame, inputs, ctx)
                 t = timer(st.name, t, ahead_ms)
-            for key, val in inputs.info.items():
-                if isinstance(val, (int, float)) and not isinstance(val, bool):
-                    stage_info[key].append(float(val))
+                if inputs.deferred is not None and deferred_by is None:
+                    deferred_by = st.name
             c0 = time.process_time()
-            if inputs.previews:
-                previews.offer(frame.index, inputs.previews)
             res = tracker.track(frame.index, frame.timestamp, frame.rgb, frame.depth, inputs.track_inputs())
             cpu_tracking.append(time.process_time() - c0)
             t = timer("tracking", t)
+            if inputs.deferred is not None and deferred_by is not None:
+                t = _run_deferred(inputs, res, previews.wants(frame.index), config.dense.stride,
+                                  timer.ms[deferred_by], t)
+            for key, val in inputs.info.items():
+                if isinstance(val, (int, float)) and not isinstance(val, bool):
+                    stage_info[key].append(float(val))
+            if inputs.previews:
+                previews.offer(frame.index, inputs.previews)
             if res.keyframe is not None:
                 mapper.process(res.keyframe)
                 t = timer("local_mapping", t)
@@ -225,6 +235,23 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     return result
 
 
+def _run_deferred(inputs: FrameInputs, res: TrackResult, preview_due: bool, stride: int, stage_ms: list[float],
+                  t0: float) -> float:
+    """Run the work a stage deferred (restoration) when this frame became a keyframe or a preview is due; give a
+    keyframe the restored images the tracker would have stored had they been there when it tracked. Its time is
+    added to the stage's entry for this frame. Returns the time now."""
+    deferred, inputs.deferred = inputs.deferred, None  # dropped when unused (it holds the frame's images)
+    why = "keyframe" if res.keyframe is not None else "preview" if preview_due else None
+    if deferred is None or why is None:
+        return t0
+    deferred(inputs, why)
+    if res.keyframe is not None and inputs.restored_rgb is not None and inputs.restored_depth is not None:
+        res.keyframe.set_dense_images(inputs.restored_rgb, inputs.restored_depth, stride)
+    t1 = time.perf_counter()
+    stage_ms[-1] += (t1 - t0) * 1000
+    return t1
+
+
 def _preparers(stages: list[FrameStage]) -> dict[str, Callable[[Frame], object]]:
     """The stages' `prepare(frame)` functions (optional in the stage contract), by stage name."""
     out: dict[str, Callable[[Frame], object]] = {}
@@ -269,6 +296,10 @@ class _PreviewPicker:
         step = max(1, total // (count + 1))
         self.wanted = {start + step * (i + 1) for i in range(count)}
         self.kept: dict[int, dict[str, np.ndarray]] = {}
+
+    def wants(self, index: int) -> bool:
+        """Whether a frame with previews at `index` would be kept."""
+        return any(w <= index for w in self.wanted)
 
     def offer(self, index: int, images: dict[str, np.ndarray]) -> None:
         # the first frame with previews at or after each wanted index

@@ -5,8 +5,9 @@ built so far and a `StageContext` -- a narrow, read-only view of the run (camera
 pose, the feature extractor, the sequence and its truth), never the tracker itself -- and returns updated
 `FrameInputs`; the pipeline hands their `track_inputs()` to the tracker.
 
-A stage may keep work off the tracking path with `prepare(frame)`: work on the frame alone, run ahead of the
-frame's turn on another thread; its result arrives in `FrameInputs.prepared`.
+Two ways for a stage to keep work off the tracking path: `prepare(frame)` (work on the frame alone, run ahead
+of the frame's turn on another thread; its result arrives in `FrameInputs.prepared`) and `FrameInputs.deferred`
+(work whose output only keyframes and previews use, run after tracking when the frame turns out to need it).
 """
 from __future__ import annotations
 
@@ -53,6 +54,11 @@ class FrameInputs:
     prepared: dict[str, object] = field(default_factory=dict)
     """Results of stages' `prepare(frame)` computed ahead on another thread, by stage name; a stage whose entry
     is missing (or None) computes the same in `process`."""
+    deferred: Callable[[FrameInputs, str], None] | None = None
+    """Work a stage left for later because tracking does not read its output (restoration, when no keypoint's
+    depth comes from restored pixels): `deferred(inputs, why)` (why: 'keyframe' or 'preview') fills the frame's
+    final inputs' `restored_rgb`, `restored_depth`, `previews` and `info` as `process` would have. The pipeline
+    calls it after tracking only when the frame became a keyframe or a preview is due, and drops it otherwise."""
 
     def track_inputs(self) -> TrackInputs:
         """The part the tracker reads."""

@@ -35,3 +35,32 @@ def test_segmentation_ahead_gives_the_same_trajectory_and_map(people_seq, tmp_pa
     assert m0["timings_ms"]["segmentation"] > 0 and m1["timings_ms"]["segmentation"] > 0
     assert "segmentation_wait" in m1["timings_ms"] and "segmentation_wait" not in m0["timings_ms"]
     assert m1["stage_info"] == m0["stage_info"]
+
+
+def test_restoration_on_demand_gives_the_same_outputs_and_restores_fewer_frames(people_seq, tmp_path):
+    for on_demand in (False, True):
+        cfg = get_preset("full", {"restoration.on_demand": on_demand})
+        run_pipeline(Sequence(people_seq, PRESETS["tum3"]), cfg, tmp_path / str(on_demand))
+    every, lazy = tmp_path / "False", tmp_path / "True"
+    for name in ("trajectory.txt", "keyframes.txt", "map.ply"):
+        assert (lazy / name).read_bytes() == (every / name).read_bytes(), name
+    previews = sorted(p.name for p in every.glob("frame_*.jpg"))
+    assert previews and sorted(p.name for p in lazy.glob("frame_*.jpg")) == previews
+    for name in previews:
+        assert (lazy / name).read_bytes() == (every / name).read_bytes(), name
+    m0, m1 = (json.loads((d / "metrics.json").read_text())["restoration"] for d in (every, lazy))
+    keyframes = json.loads((lazy / "metrics.json").read_text())["keyframes"]
+    assert m0["restored_for"] == {"tracking": m0["restored_frames"]} and m0["not_restored"] == 0
+    # on demand: keyframes (with a hole) and previews only, unless a keypoint's depth reads the hole
+    assert m1["restored_frames"] < m0["restored_frames"]
+    assert m1["restored_for"].get("keyframe", 0) <= keyframes
+    assert m1["restored_frames"] + m1["not_restored"] == m0["restored_frames"]
+    assert m1["truth"]["frames_scored"] == m1["restored_frames"]
+
+
+def test_restored_features_restore_every_frame(people_seq, tmp_path):
+    cfg = get_preset("full", {"restoration.restored_features": True})
+    res = run_pipeline(Sequence(people_seq, PRESETS["tum3"]), cfg, None, max_frames=12)
+    m = res.metrics["restoration"]
+    assert m["restored_frames"] > 0 and m["restored_for"] == {"tracking": m["restored_frames"]}
+    assert m["not_restored"] == 0

@@ -7,10 +7,16 @@ pixels estimated against the target by geometry (`lookahead`). The target's own 
 prediction (geometry-first copying and PatchMatch absorb its small error). The restored RGB and
 depth replace the raw frame for keypoint depth and the dense map, and ORB keypoints found in the restored region
 (strong response, confident depth, seen by a reference) are handed to the tracker as extra features.
+
+On demand (`on_demand`, the default): tracking reads restored pixels only through restored features (off by
+default) and through the depth looked up at keypoints whose few-pixel neighbourhood reaches into the hole. A
+frame with neither is not restored in `process`: its restoration is left in `FrameInputs.deferred`, which the
+pipeline runs only when the frame becomes a keyframe (the dense map) or a preview is due. Outputs are the
+same; the restoration metrics then cover the restored frames only (`restored_frames`, `restored_for`).
 """
 from __future__ import annotations
 
-from collections import deque
+from collections import Counter, deque
 from dataclasses import dataclass, field
 
 import cv2
@@ -49,6 +55,11 @@ class RestorationStageConfig:
     """Holes smaller than this fraction of the image are not worth restoring."""
     previews: int = valid(6, 0, 1_000)
     """Frames whose raw / mask / restored images are kept as preview artifacts."""
+    on_demand: bool = True
+    """Restore only frames whose restored images something uses: keyframes (the dense map), preview frames and
+    frames whose keypoint depth would come from restored pixels (always, with `restored_features`). The others'
+    restoration changed no output but the restoration metrics, and cost most of the frame's time. False:
+    every frame with a hole is restored (the restoration metrics then cover all of them)."""
 
     def __post_init__(self) -> None:
         if self.references not in ("causal", "both-sided"):
@@ -78,6 +89,9 @@ class RestorationStage:
         self.psnr: list[float] = []
         self.depth_err: list[float] = []
         self.restored_frames = 0
+        self.restored_for: Counter[str] = Counter()
+        """Why frames were restored: 'tracking' (in `process`), 'keyframe' or 'preview' (deferred)."""
+        self.deferred = 0
         self.extra = 0
         self.relaxed = 0
 
@@ -93,20 +107,46 @@ class RestorationStage:
         self._record_pose(ctx)
         hole = inputs.dynamic_mask if inputs.dynamic_mask is not None else np.zeros(frame.depth.shape, bool)
         desc = inputs.features.desc if inputs.features is not None else None
-        if hole.mean() >= self.cfg.min_hole_fraction:
-            self._restore(frame, hole, desc, inputs, ctx)
+        # before the first tracked frame there is no pose to warp into
+        if hole.mean() >= self.cfg.min_hole_fraction and ctx.T_WC_pred is not None:
+            past = list(self.past)  # the references as they are now: a deferred call must see the same
+            inputs.info["hole_fraction"] = float(hole.mean())  # every frame with a hole, restored or not
+            if self.cfg.on_demand and not self._tracking_reads(hole, inputs, ctx):
+                self.deferred += 1
+                inputs.deferred = lambda out, why: self._restore(frame, hole, desc, out, ctx, past, why)
+            else:
+                self._restore(frame, hole, desc, inputs, ctx, past, "tracking")
         self.past.append(_Past(frame.index, frame.rgb, frame.depth, hole, desc))
         return inputs
 
+    def _tracking_reads(self, hole: np.ndarray, inputs: FrameInputs, ctx: StageContext) -> bool:
+        """Whether the tracker would read any restored pixel of this frame: restored features, no features of
+        the stages' own (it extracts from the restored RGB), or a keypoint whose depth lookup (2x2 bilinear,
+        nearest pixel, `depth_edge_radius_px` window: `features.depth.lookup_depth`) touches the hole, the
+        only pixels restoration changes."""
+        feats = inputs.features
+        if self.cfg.restored_features or feats is None:
+            return True
+        if not len(feats):
+            return False
+        h, w = hole.shape
+        r = ctx.config.features.depth_edge_radius_px
+        x0 = np.clip(feats.uv[:, 0], 0, w - 1.001).astype(int)
+        y0 = np.clip(feats.uv[:, 1], 0, h - 1.001).astype(int)
+        # hole pixels in the box [x0 - r, x0 + 1 + r] x [y0 - r, y0 + 1 + r] (clipped), by an integral image
+        cum = cv2.integral(hole.astype(np.uint8))
+        xa, xb = np.clip(x0 - r, 0, w), np.clip(x0 + 2 + r, 0, w)
+        ya, yb = np.clip(y0 - r, 0, h), np.clip(y0 + 2 + r, 0, h)
+        return bool(np.any(cum[yb, xb] - cum[ya, xb] - cum[yb, xa] + cum[ya, xa] > 0))
+
     def _restore(self, frame: Frame, hole: np.ndarray, desc: np.ndarray | None, inputs: FrameInputs,
-                 ctx: StageContext) -> None:
+                 ctx: StageContext, past: list[_Past], why: str) -> None:
         T_pred = ctx.T_WC_pred
-        if T_pred is None:  # before the first tracked frame there is no pose to warp into
-            return
+        assert T_pred is not None
         both = self.cfg.references == "both-sided"
         views: dict[int, ReferenceView] = {}
         cands: list[Candidate] = []
-        for p in self.past:
+        for p in past:
             if p.T_WC is not None:
                 views[p.index] = ReferenceView(p.rgb, p.depth, p.T_WC, p.dynamic)
                 cands.append(Candidate(p.index, p.T_WC, p.desc))
@@ -126,8 +166,10 @@ class RestorationStage:
         refs = [views[i] for i in sel.indices]
         out = restore_frame(frame.rgb, frame.depth, hole, T_pred, refs, self.camera.K, self.cfg.restoration)
         inputs.restored_rgb, inputs.restored_depth = out.rgb, out.depth
+        inputs.deferred = None
         self.restored_frames += 1
-        inputs.info.update(references=len(refs), hole_fraction=float(hole.mean()),
+        self.restored_for[why] += 1
+        inputs.info.update(references=len(refs),
                            hole_seen_fraction=float(out.seen_by_reference.sum() / max(hole.sum(), 1)))
         if self.cfg.restored_features:
             extra = self._restored_features(out, hole, inputs.features, ctx)
@@ -184,10 +226,13 @@ class RestorationStage:
 
     def summary(self) -> dict:
         out: dict = {"references": self.cfg.references, "restored_frames": self.restored_frames,
+                     "restored_for": dict(sorted(self.restored_for.items())),
+                     "not_restored": self.deferred - self.restored_for["keyframe"] - self.restored_for["preview"],
                      "future_references": self.future_refs, "restored_features": self.extra,
                      "relaxed_reference_choices": self.relaxed}
         if self.psnr:
-            out["truth"] = {"restoration_psnr": float(np.mean(self.psnr)),
+            # over the restored frames only: on demand, those are the keyframes and previews (`restored_for`)
+            out["truth"] = {"frames_scored": len(self.psnr), "restoration_psnr": float(np.mean(self.psnr)),
                             "restoration_depth_median_m": float(np.median(self.depth_err)) if self.depth_err
                             else None}
         return out

@@ -27,6 +27,12 @@ class KeyFrame:
     measured_small: np.ndarray | None = None
     bow: dict[int, float] = field(default_factory=dict)
 
+    def set_dense_images(self, rgb: np.ndarray, depth: np.ndarray, stride: int) -> None:
+        """Replace the copy the dense map is fused from with every `stride`-th pixel of `rgb` (H,W,3) uint8 RGB
+        and `depth` (H,W) float32 m, as the tracker takes them (a frame restored after it became a keyframe)."""
+        self.rgb_small = rgb[::stride, ::stride].copy()
+        self.depth_small = np.ascontiguousarray(depth[::stride, ::stride]).copy()
+
     @property
     def center(self) -> np.ndarray:
         return self.T_WC[:3, 3]

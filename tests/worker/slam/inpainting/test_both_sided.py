@@ -54,7 +54,8 @@ class WallSequence:
 
 
 def run_stage(references: str) -> tuple[FrameInputs, RestorationStage, np.ndarray]:
-    config = get_preset("full", {"restoration.references": references})
+    # every frame restored in `process` (not deferred to keyframes and previews): the target's result is read here
+    config = get_preset("full", {"restoration.references": references, "restoration.on_demand": False})
     camera = Camera(fx=K[0, 0], fy=K[1, 1], cx=K[0, 2], cy=K[1, 2], width=W, height=H)
     extractor = OrbExtractor(config.features)
     seq = WallSequence()
