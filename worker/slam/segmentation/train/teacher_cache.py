@@ -40,7 +40,8 @@ def soft_labels(teacher: Path, images: list[Path], classes: tuple[str, ...], cac
         raise ConfigError(f"teacher {teacher.name} predicts classes the model lacks: {sorted(missing)}")
     cols = [classes.index(c) for c in seg.classes]
     out = None
-    for i, img in enumerate(tqdm(images, desc=f"teacher {teacher.stem}", unit="img")):
+    # disable=None: no bar when stderr is not a terminal (a training log would fill with redraws)
+    for i, img in enumerate(tqdm(images, desc=f"teacher {teacher.stem}", unit="img", disable=None)):
         p = seg.predict_probs(read_rgb(img))
         if grid is not None and p.shape[:2] != grid:
             p = cv2.resize(p, (grid[1], grid[0]), interpolation=cv2.INTER_AREA)
