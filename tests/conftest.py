@@ -1,4 +1,5 @@
-"""Shared fixtures: where the real data lives (../shared, or VTD_SHARED_DIR) and skips when it is absent."""
+"""Shared fixtures: where the real data lives (../shared, or VTD_SHARED_DIR) and skips when it is absent; an
+environment without a developer's VTD_* variables (folders and modules that need it turn it on)."""
 from __future__ import annotations
 
 import os
@@ -27,3 +28,11 @@ def redkitchen(shared: Path) -> Path:
     if not (path / "rgb.txt").is_file():
         pytest.skip(f"{path} not present")
     return path
+
+
+@pytest.fixture
+def no_vtd_env(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A developer's or CI's VTD_* variables must not redirect tests to real data (VTD_TEST_* stay)."""
+    for key in list(os.environ):
+        if key.startswith("VTD_") and not key.startswith("VTD_TEST_"):
+            monkeypatch.delenv(key)

@@ -1,5 +1,5 @@
-"""Markers of the end-to-end tests (registered here too, so running this folder alone knows them), and the
-real Chromium the browser tests drive (Debian's; Playwright never downloads one)."""
+"""The real Chromium the browser tests drive (Debian's; Playwright never downloads one) and where their
+screenshots go."""
 from __future__ import annotations
 
 import os
@@ -22,6 +22,10 @@ def playwright_api() -> ModuleType:
     return api
 
 
-def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", "postgres: needs PostgreSQL at 127.0.0.1:5432 (skipped when absent)")
-    config.addinivalue_line("markers", "redis: needs Redis at 127.0.0.1:6379 (skipped when absent)")
+@pytest.fixture(scope="module")
+def shots(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Where screenshots go: ``$VTD_SCREENSHOT_DIR`` or a temp folder (its path is printed)."""
+    d = Path(os.environ.get("VTD_SCREENSHOT_DIR") or tmp_path_factory.mktemp("screenshots"))
+    d.mkdir(parents=True, exist_ok=True)
+    print(f"\nscreenshots in {d}")
+    return d

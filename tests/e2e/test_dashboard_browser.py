@@ -16,7 +16,6 @@ from __future__ import annotations
 import inspect
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -28,8 +27,8 @@ import httpx
 import pytest
 
 from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
+from tests.e2e.services import ROOT, ServiceProcesses
 
-ROOT = Path(__file__).resolve().parents[2]
 JOB_TIMEOUT_MS = 300_000  # the pipeline runs on a shared CPU
 VIEWER_WAIT_S = 12
 UPLOAD_BYTES_PER_S = 16 * 1024 * 1024
@@ -50,102 +49,29 @@ def dashboard_app():
     return app
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _dashboard_in_factory() -> bool:
     import backend.app
 
     return "include_dashboard" in inspect.getsource(backend.app)
 
 
-class Processes:
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory, playwright_api) -> Iterator[ServiceProcesses]:
     """`vtdslam serve` (api + worker + viewer) when create_app includes the dashboard; otherwise the api
     through :func:`dashboard_app`, `vtdslam worker` and `vtdslam viewer` as three processes."""
-
-    def __init__(self, tmp: Path) -> None:
-        self.port, self.viewer_port = _free_port(), _free_port()
-        self.base = f"http://127.0.0.1:{self.port}"
-        clean = {k: v for k, v in os.environ.items() if not k.startswith("VTD_") or k.startswith("VTD_TEST_")}
-        self.env = {**clean, "VTD_DATA_DIR": str(tmp / "data"), "VTD_PORT": str(self.port),
-                    "VTD_VIEWER_PORT": str(self.viewer_port), "PYTHONUNBUFFERED": "1"}
-        self.log_path = tmp / "service.log"
-        self.procs: list[tuple[subprocess.Popen, int]] = []
-
-    def _spawn(self, args: list[str], stop_signal: int) -> None:
-        p = subprocess.Popen([sys.executable, *args], cwd=ROOT, env=self.env, stdout=self.log,
-                             stderr=subprocess.STDOUT, start_new_session=True)
-        self.procs.append((p, stop_signal))
-
-    def start(self) -> None:
-        self.log = open(self.log_path, "wb")
+    with ServiceProcesses(tmp_path_factory.mktemp("dash")) as svc:
+        api_up = svc.healthy(f"{svc.base}/api/v1/health")
         if _dashboard_in_factory():
-            self._spawn(["-m", "cli.main", "serve"], signal.SIGINT)
-            self._wait_api()
+            svc.spawn("-m", "cli.main", "serve")
+            svc.wait_until("the api", api_up)
         else:
-            self._spawn(["-m", "uvicorn", "tests.e2e.test_dashboard_browser:dashboard_app", "--factory",
-                         "--host", "127.0.0.1", "--port", str(self.port)], signal.SIGTERM)
-            self._wait_api()  # it migrates the database; then the others start
-            self._spawn(["-m", "cli.main", "worker"], signal.SIGTERM)
-            self._spawn(["-m", "cli.main", "viewer"], signal.SIGINT)
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            try:
-                if httpx.get(f"http://127.0.0.1:{self.viewer_port}/health", timeout=1).status_code == 200:
-                    return
-            except httpx.HTTPError:
-                time.sleep(0.3)
-        raise AssertionError("the viewer hub did not come up\n" + self.tail())
-
-    def _wait_api(self) -> None:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            for p, _ in self.procs:
-                assert p.poll() is None, self.tail()
-            try:
-                if httpx.get(f"{self.base}/api/v1/health", timeout=1).status_code == 200:
-                    return
-            except httpx.HTTPError:
-                pass
-            time.sleep(0.2)
-        raise AssertionError("the api did not come up\n" + self.tail())
-
-    def stop(self) -> None:
-        for p, sig in self.procs:
-            if p.poll() is None:
-                p.send_signal(sig)
-        for p, _ in self.procs:
-            try:
-                p.wait(40)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-        self.log.close()
-
-    def tail(self) -> str:
-        self.log.flush()
-        return self.log_path.read_text(errors="replace")[-5000:]
-
-
-@pytest.fixture(scope="module")
-def service(tmp_path_factory: pytest.TempPathFactory, playwright_api) -> Iterator[Processes]:
-    svc = Processes(tmp_path_factory.mktemp("dash"))
-    svc.start()
-    try:
+            svc.spawn("-m", "uvicorn", "tests.e2e.test_dashboard_browser:dashboard_app", "--factory",
+                      "--host", "127.0.0.1", "--port", str(svc.port), stop_signal=signal.SIGTERM)
+            svc.wait_until("the api", api_up)  # it migrates the database; then the others start
+            svc.spawn("-m", "cli.main", "worker", stop_signal=signal.SIGTERM)
+            svc.spawn("-m", "cli.main", "viewer")
+        svc.wait_until("the viewer hub", svc.healthy(f"http://127.0.0.1:{svc.viewer_port}/health"))
         yield svc
-    finally:
-        svc.stop()
-
-
-@pytest.fixture(scope="module")
-def shots(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    d = Path(os.environ.get("VTD_SCREENSHOT_DIR") or tmp_path_factory.mktemp("screenshots"))
-    d.mkdir(parents=True, exist_ok=True)
-    print(f"\nscreenshots in {d}")
-    return d
 
 
 @pytest.fixture(scope="module")
@@ -171,7 +97,7 @@ def js_errors() -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def page(playwright_api, service: Processes, js_errors: list[str]):
+def page(playwright_api, service: ServiceProcesses, js_errors: list[str]):
     with playwright_api.sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
         context = browser.new_context(viewport={"width": 1280, "height": 900}, base_url=service.base)
@@ -214,7 +140,7 @@ OVERFLOW_JS = """() => ({
 })"""
 
 
-def test_dashboard_flow(page, js_errors: list[str], service: Processes, archive: Path, shots: Path,
+def test_dashboard_flow(page, js_errors: list[str], service: ServiceProcesses, archive: Path, shots: Path,
                         tmp_path: Path) -> None:
     expect = pytest.importorskip("playwright.sync_api").expect
 
@@ -265,7 +191,7 @@ def test_dashboard_flow(page, js_errors: list[str], service: Processes, archive:
     expect(page.locator("#upload-note")).to_contain_text("Upload cancelled; nothing was stored")
     expect(page.locator("#upload-progress")).to_be_hidden()
     _throttle(page, -1)
-    staging = Path(service.env["VTD_DATA_DIR"]) / "staging"
+    staging = service.data_dir / "staging"
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline and staging.exists() and any(staging.iterdir()):
         time.sleep(0.2)  # the api sees the disconnect on its next read, then removes the staged part
@@ -421,11 +347,11 @@ def test_dashboard_flow(page, js_errors: list[str], service: Processes, archive:
     assert not js_errors, js_errors
 
 
-def _batch_done(service: Processes, batch_id: str) -> bool:
+def _batch_done(service: ServiceProcesses, batch_id: str) -> bool:
     return httpx.get(f"{service.base}/api/v1/batches/{batch_id}", timeout=10).json()["status"] == "finished"
 
 
-def _layout_at_every_width(browser, service: Processes, shots: Path, pages: dict[str, tuple[str, str]]) -> None:
+def _layout_at_every_width(browser, service: ServiceProcesses, shots: Path, pages: dict[str, tuple[str, str]]) -> None:
     """Each page, fresh, at each width: no sideways page scroll, buttons on screen, not one console error."""
     problems = []
     for width in LAYOUT_WIDTHS:

@@ -14,7 +14,6 @@ import socket
 import subprocess
 import sys
 import time
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -22,10 +21,9 @@ import httpx
 import pytest
 
 from tests.backend.api.data import tar_gz, write_sequence
+from tests.backends import scaled_urls
 
 ROOT = Path(__file__).resolve().parents[2]
-PG_URL = os.environ.get("VTD_TEST_POSTGRES_URL", "postgresql://postgres@127.0.0.1:5432/test")
-REDIS_BASE = os.environ.get("VTD_TEST_REDIS_BASE", "redis://127.0.0.1:6379")
 
 pytestmark = pytest.mark.slow
 
@@ -237,35 +235,14 @@ def test_queued_jobs_wait_for_a_worker_and_survive_restarts(tmp_path: Path):
 
 @pytest.fixture
 def scaled_service(tmp_path: Path) -> Iterator[tuple[Service, str]]:
-    psycopg = pytest.importorskip("psycopg")
-    redis = pytest.importorskip("redis")
-    try:
-        psycopg.connect(PG_URL, connect_timeout=3).close()
-    except Exception as exc:
-        pytest.skip(f"PostgreSQL not reachable at {PG_URL}: {exc}")
-    try:
-        redis.Redis.from_url(REDIS_BASE, socket_connect_timeout=3).ping()
-    except Exception as exc:
-        pytest.skip(f"Redis not reachable at {REDIS_BASE}: {exc}")
-    # A redis database nobody is using (the queue's name is fixed), flushed afterwards.
-    db_index = next((i for i in range(1, 15) if redis.Redis.from_url(f"{REDIS_BASE}/{i}").dbsize() == 0), None)
-    if db_index is None:
-        pytest.skip("no empty Redis database among 1..14")
-    schema = f"vtd_e2e_{uuid.uuid4().hex[:12]}"
-    with psycopg.connect(PG_URL, autocommit=True) as conn:
-        conn.execute(f'CREATE SCHEMA "{schema}"')
-    db_url = f"{PG_URL}?options=-csearch_path%3D{schema}"
-    svc = Service(tmp_path / "data", {"VTD_DATABASE_URL": db_url, "VTD_QUEUE_URL": f"{REDIS_BASE}/{db_index}"},
-                  "--no-viewer")
-    try:
-        svc.start()
-        yield svc, db_url
-    finally:
-        if svc.proc is not None:
-            svc.stop()
-        redis.Redis.from_url(f"{REDIS_BASE}/{db_index}").flushdb()
-        with psycopg.connect(PG_URL, autocommit=True) as conn:
-            conn.execute(f'DROP SCHEMA "{schema}" CASCADE')
+    with scaled_urls("vtd_e2e_") as (db_url, queue_url):
+        svc = Service(tmp_path / "data", {"VTD_DATABASE_URL": db_url, "VTD_QUEUE_URL": queue_url}, "--no-viewer")
+        try:
+            svc.start()
+            yield svc, db_url
+        finally:
+            if svc.proc is not None:
+                svc.stop()
 
 
 @pytest.mark.postgres

@@ -10,14 +10,8 @@ Needs Playwright's Python package and Debian's ``chromium``; skipped without the
 """
 from __future__ import annotations
 
-import os
-import signal
-import socket
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -27,90 +21,26 @@ import pytest
 from storage.artifacts import ArtifactStore
 from tests.backend.api.data import tar_gz, write_sequence
 from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
+from tests.e2e.services import ServiceProcesses, listening
 from tests.webui.test_viewer import write_run
 
-ROOT = Path(__file__).resolve().parents[2]
 HOST = "127.0.0.2"
-START_TIMEOUT_S = 60
 SCENE_TIMEOUT_MS = 60_000  # viser's first scene messages; SwiftShader and a shared CPU are slow
 
 pytestmark = pytest.mark.slow
 
 
-def _free_port(host: str) -> int:
-    with socket.socket() as s:
-        s.bind((host, 0))
-        return s.getsockname()[1]
-
-
-def _listening(host: str, port: int) -> bool:
-    try:
-        socket.create_connection((host, port), timeout=1).close()
-    except OSError:
-        return False
-    return True
-
-
-@dataclass
-class Service:
-    """`vtdslam serve --host HOST --no-worker` on free ports and a temp data dir."""
-
-    tmp: Path
-    port: int = field(default_factory=lambda: _free_port(HOST))
-    viewer_port: int = field(default_factory=lambda: _free_port(HOST))
-    proc: subprocess.Popen[bytes] | None = None
-
-    @property
-    def base(self) -> str:
-        return f"http://{HOST}:{self.port}"
-
-    @property
-    def data_dir(self) -> Path:
-        return self.tmp / "data"
-
-    def start(self) -> None:
-        clean = {k: v for k, v in os.environ.items() if not k.startswith("VTD_") or k.startswith("VTD_TEST_")}
-        env = {**clean, "VTD_DATA_DIR": str(self.data_dir), "VTD_VIEWER_PORT": str(self.viewer_port),
-               "PYTHONUNBUFFERED": "1"}
-        self.log = open(self.tmp / "service.log", "wb")  # noqa: SIM115 (closed in stop)
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "cli.main", "serve", "--host", HOST, "--port", str(self.port), "--no-worker"],
-            cwd=ROOT, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
-        deadline = time.monotonic() + START_TIMEOUT_S
-        while time.monotonic() < deadline:
-            assert self.proc.poll() is None, self.tail()
-            if _listening(HOST, self.port) and _listening(HOST, self.viewer_port):
-                return
-            time.sleep(0.2)
-        raise AssertionError("the service did not come up\n" + self.tail())
-
-    def stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(40)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self.log.close()
-
-    def tail(self) -> str:
-        self.log.flush()
-        return (self.tmp / "service.log").read_text(errors="replace")[-5000:]
-
-
 @pytest.fixture(scope="module")
-def service(tmp_path_factory: pytest.TempPathFactory, playwright_api) -> Iterator[Service]:
-    svc = Service(tmp_path_factory.mktemp("proxy"))
-    svc.start()
-    try:
+def service(tmp_path_factory: pytest.TempPathFactory, playwright_api) -> Iterator[ServiceProcesses]:
+    """`vtdslam serve --host HOST --no-worker` on free ports of HOST and a temp data dir."""
+    with ServiceProcesses(tmp_path_factory.mktemp("proxy"), HOST) as svc:
+        svc.spawn("-m", "cli.main", "serve", "--host", HOST, "--port", str(svc.port), "--no-worker")
+        svc.wait_until("the service", lambda: listening(HOST, svc.port) and listening(HOST, svc.viewer_port))
         yield svc
-    finally:
-        svc.stop()
 
 
 @pytest.fixture(scope="module")
-def job_id(service: Service, tmp_path_factory: pytest.TempPathFactory) -> str:
+def job_id(service: ServiceProcesses, tmp_path_factory: pytest.TempPathFactory) -> str:
     """A queued job (no worker runs it) whose run artifacts are in place, as a finished run leaves them."""
     tmp = tmp_path_factory.mktemp("seq")
     archive = tar_gz(write_sequence(tmp / "rgbd_dataset_proxy", n=3), tmp / "s.tgz", top="rgbd_dataset_proxy")
@@ -126,7 +56,7 @@ def job_id(service: Service, tmp_path_factory: pytest.TempPathFactory) -> str:
 
 
 @pytest.fixture
-def page(playwright_api, service: Service) -> Iterator[tuple[object, list[str], list[str]]]:
+def page(playwright_api, service: ServiceProcesses) -> Iterator[tuple[object, list[str], list[str]]]:
     """A Chromium page, the console errors and page errors it logs, and every URL it requested."""
     errors: list[str] = []
     requested: list[str] = []
@@ -142,26 +72,18 @@ def page(playwright_api, service: Service) -> Iterator[tuple[object, list[str], 
             browser.close()
 
 
-def _off_origin(urls: list[str], service: Service) -> list[str]:
+def _off_origin(urls: list[str], service: ServiceProcesses) -> list[str]:
     own = f"{HOST}:{service.port}"
     return [u for u in urls if urlsplit(u).scheme in ("http", "https", "ws", "wss") and urlsplit(u).netloc != own]
 
 
-def test_everything_binds_the_host_it_was_told(service: Service) -> None:
-    assert _listening(HOST, service.port) and _listening(HOST, service.viewer_port)
-    assert not _listening("127.0.0.1", service.port) and not _listening("127.0.0.1", service.viewer_port)
+def test_everything_binds_the_host_it_was_told(service: ServiceProcesses) -> None:
+    assert listening(HOST, service.port) and listening(HOST, service.viewer_port)
+    assert not listening("127.0.0.1", service.port) and not listening("127.0.0.1", service.viewer_port)
 
 
-@pytest.fixture(scope="module")
-def shots(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Where screenshots go: ``$VTD_SCREENSHOT_DIR`` or a temp folder (its path is printed)."""
-    d = Path(os.environ.get("VTD_SCREENSHOT_DIR") or tmp_path_factory.mktemp("screenshots"))
-    d.mkdir(parents=True, exist_ok=True)
-    print(f"screenshots in {d}")
-    return d
-
-
-def test_the_runs_viewer_opens_through_the_apis_origin(page, service: Service, job_id: str, shots: Path) -> None:
+def test_the_runs_viewer_opens_through_the_apis_origin(page, service: ServiceProcesses, job_id: str,
+                                                       shots: Path) -> None:
     pg, errors, requested = page
     r = httpx.get(f"{service.base}/api/v1/jobs/{job_id}/viewer", timeout=30)
     assert r.status_code == 200, r.text
@@ -192,7 +114,7 @@ def test_the_runs_viewer_opens_through_the_apis_origin(page, service: Service, j
 
 
 @pytest.mark.parametrize(("path", "rendered"), [("/docs", ".swagger-ui .opblock"), ("/redoc", "[role=menuitem]")])
-def test_api_docs_render_offline(page, service: Service, path: str, rendered: str) -> None:
+def test_api_docs_render_offline(page, service: ServiceProcesses, path: str, rendered: str) -> None:
     pg, errors, requested = page
     blocked: list[str] = []
 
@@ -211,7 +133,7 @@ def test_api_docs_render_offline(page, service: Service, path: str, rendered: st
     assert not errors, errors
 
 
-def test_the_dashboards_api_link_opens_the_docs_offline(page, service: Service) -> None:
+def test_the_dashboards_api_link_opens_the_docs_offline(page, service: ServiceProcesses) -> None:
     pg, errors, requested = page
     pg.route("**/*", lambda route: route.continue_() if urlsplit(route.request.url).hostname == HOST
              else route.abort())

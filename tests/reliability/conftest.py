@@ -1,7 +1,6 @@
 """Fixtures of the reliability tests: a clean environment, a data dir with its api, worker processes."""
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -12,16 +11,9 @@ from storage.settings import Settings, get_settings
 from tests.reliability.procs import Procs
 
 
-def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", "postgres: needs PostgreSQL at 127.0.0.1:5432 (skipped when absent)")
-    config.addinivalue_line("markers", "redis: needs Redis at 127.0.0.1:6379 (skipped when absent)")
-
-
 @pytest.fixture(autouse=True)
-def _no_vtd_env(monkeypatch: pytest.MonkeyPatch) -> None:
-    for key in list(os.environ):
-        if key.startswith("VTD_") and not key.startswith("VTD_TEST_"):
-            monkeypatch.delenv(key)
+def _no_vtd_env(no_vtd_env: None) -> None:
+    """Every test here runs without a developer's VTD_* variables (tests/conftest.py)."""
 
 
 @pytest.fixture

@@ -6,9 +6,7 @@ and every job has its results. Skipped with a reason when PostgreSQL or Redis is
 """
 from __future__ import annotations
 
-import os
 import re
-import uuid
 from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
@@ -17,11 +15,10 @@ import pytest
 
 from storage.settings import Settings, get_settings
 from tests.backend.api.data import write_sequence
+from tests.backends import scaled_urls
 from tests.reliability.conftest import api_client
 from tests.reliability.procs import FINAL, Procs, clean_env, job, submit, upload, wait_for
 
-PG_URL = os.environ.get("VTD_TEST_POSTGRES_URL", "postgresql://postgres@127.0.0.1:5432/test")
-REDIS_BASE = os.environ.get("VTD_TEST_REDIS_BASE", "redis://127.0.0.1:6379")
 JOBS = 10
 FRAMES = 60
 
@@ -31,35 +28,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.postgres, pytest.mark.redis]
 @pytest.fixture
 def scaled(tmp_path: Path) -> Iterator[Settings]:
     """Settings on a fresh PostgreSQL schema and an empty Redis database, both removed afterwards."""
-    psycopg = pytest.importorskip("psycopg")
-    redis = pytest.importorskip("redis")
-    try:
-        psycopg.connect(PG_URL, connect_timeout=3).close()
-    except Exception as exc:
-        pytest.skip(f"PostgreSQL not reachable at {PG_URL}: {exc}")
-    try:
-        redis.Redis.from_url(REDIS_BASE, socket_connect_timeout=3).ping()
-    except Exception as exc:
-        pytest.skip(f"Redis not reachable at {REDIS_BASE}: {exc}")
-    # The queue's name is fixed, so a database nobody uses isolates it (claimed with a marker key).
-    db_index = None
-    for i in range(1, 15):
-        r = redis.Redis.from_url(f"{REDIS_BASE}/{i}")
-        if r.dbsize() == 0 and r.set("vtd-test-owner", uuid.uuid4().hex, nx=True):
-            db_index = i
-            break
-    if db_index is None:
-        pytest.skip("no empty Redis database among 1..14")
-    schema = f"vtd_scale_{uuid.uuid4().hex[:12]}"
-    with psycopg.connect(PG_URL, autocommit=True) as conn:
-        conn.execute(f'CREATE SCHEMA "{schema}"')
-    try:
-        yield get_settings(data_dir=tmp_path / "data", database_url=f"{PG_URL}?options=-csearch_path%3D{schema}",
-                           queue_url=f"{REDIS_BASE}/{db_index}")
-    finally:
-        redis.Redis.from_url(f"{REDIS_BASE}/{db_index}").flushdb()
-        with psycopg.connect(PG_URL, autocommit=True) as conn:
-            conn.execute(f'DROP SCHEMA "{schema}" CASCADE')
+    with scaled_urls("vtd_scale_") as (database_url, queue_url):
+        yield get_settings(data_dir=tmp_path / "data", database_url=database_url, queue_url=queue_url)
 
 
 def test_two_workers_on_redis_and_postgres_run_a_batch_once_each(scaled: Settings, procs: Procs, tmp_path):

@@ -23,17 +23,9 @@ PG_URL = os.environ.get("VTD_TEST_POSTGRES_URL", "postgresql://postgres@127.0.0.
 REDIS_URL = os.environ.get("VTD_TEST_REDIS_URL", "redis://127.0.0.1:6379/15")
 
 
-def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", "postgres: needs PostgreSQL at 127.0.0.1:5432 (skipped when absent)")
-    config.addinivalue_line("markers", "redis: needs Redis at 127.0.0.1:6379 (skipped when absent)")
-
-
 @pytest.fixture(autouse=True)
-def _no_vtd_env(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A developer's or CI's VTD_* variables must not redirect tests to real data."""
-    for key in list(os.environ):
-        if key.startswith("VTD_") and not key.startswith("VTD_TEST_"):
-            monkeypatch.delenv(key)
+def _no_vtd_env(no_vtd_env: None) -> None:
+    """Every test here runs without a developer's VTD_* variables (tests/conftest.py)."""
 
 
 @pytest.fixture

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import os
 import re
 import socket
 import threading
@@ -24,12 +23,7 @@ from webui.viewer.hub import QuietHTTPServer
 PAGE_WEIGHT_BUDGET = 80_000
 """Bytes of the job page with its CSS and scripts (uncompressed): no frameworks, no bundles."""
 
-
-@pytest.fixture(autouse=True)
-def _no_vtd_env(monkeypatch: pytest.MonkeyPatch) -> None:
-    for key in list(os.environ):
-        if key.startswith("VTD_") and not key.startswith("VTD_TEST_"):
-            monkeypatch.delenv(key)
+pytestmark = pytest.mark.usefixtures("no_vtd_env")  # tests/conftest.py
 
 
 def _free_port() -> int:

@@ -3,7 +3,6 @@ cancel, failures, deletion, shutdown, orphans, and the huey round trip api-enque
 from __future__ import annotations
 
 import json
-import os
 import threading
 from pathlib import Path
 
@@ -24,12 +23,7 @@ METRICS = {"frames": 5, "fps": 12.5, "tracked": 4, "lost": 1, "timings_ms": {"tr
            "ate": {"rmse": 0.02, "mean": 0.01, "median": 0.01, "std": 0.005, "max": 0.05},
            "rpe": {"trans": {"rmse": 0.01}, "rot": {"rmse": 0.3}}}
 
-
-@pytest.fixture(autouse=True)
-def _no_vtd_env(monkeypatch: pytest.MonkeyPatch) -> None:
-    for key in list(os.environ):
-        if key.startswith("VTD_") and not key.startswith("VTD_TEST_"):
-            monkeypatch.delenv(key)
+pytestmark = pytest.mark.usefixtures("no_vtd_env")  # tests/conftest.py
 
 
 class FakePipeline:

@@ -1,7 +1,6 @@
 """An app on a temp data dir and SQLite, with a recording queue instead of huey."""
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -14,10 +13,8 @@ from tests.backend.api.data import tar_gz, write_sequence
 
 
 @pytest.fixture(autouse=True)
-def _no_vtd_env(monkeypatch: pytest.MonkeyPatch) -> None:
-    for key in list(os.environ):
-        if key.startswith("VTD_") and not key.startswith("VTD_TEST_"):
-            monkeypatch.delenv(key)
+def _no_vtd_env(no_vtd_env: None) -> None:
+    """Every test here runs without a developer's VTD_* variables (tests/conftest.py)."""
 
 
 class RecordingQueue:

@@ -17,7 +17,7 @@ from backend.app import create_app
 from storage.settings import Settings, get_settings
 from tests.backend.api.conftest import leftovers, upload
 from tests.backend.api.data import zip_of
-from tests.backend.api.pg import pg_schema_url
+from tests.backends import pg_schema_url
 
 BOUNDARY = "vtd-test-boundary"
 

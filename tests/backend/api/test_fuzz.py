@@ -43,7 +43,7 @@ from storage.models import Batch, JobStatus
 from storage.repositories import jobs, sequences
 from storage.settings import Settings, get_settings
 from tests.backend.api.data import write_sequence
-from tests.backend.api.pg import pg_schema_url
+from tests.backends import pg_schema_url
 
 # Per operation and mode: the file runs in well under a minute on 2 CPUs. A deeper run on demand:
 # VTD_TEST_FUZZ_EXAMPLES=500 VTD_TEST_FUZZ_SEED=7 pytest tests/backend/api/test_fuzz.py

@@ -17,7 +17,7 @@ from storage.repositories import sequences
 from storage.settings import Settings, get_settings
 from tests.backend.api.conftest import RecordingQueue, leftovers, upload
 from tests.backend.api.data import tar_gz, write_sequence
-from tests.backend.api.pg import pg_schema_url
+from tests.backends import pg_schema_url
 from tests.storage.ingest.bombs import header_bomb
 
 DEEP = 255
