@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from worker.slam.map.keyframe import KeyFrame
-from worker.slam.mapping.dense import backproject_keyframe, pixel_rays
+from worker.slam.mapping.dense import backproject_keyframe, depth_edges, pixel_rays
 
 BORDER_PX = 2
 """Outer frame of the strided images left out of the volume."""
@@ -79,8 +79,6 @@ def fuse_tsdf(keyframes: list[KeyFrame], K: np.ndarray, stride: int, voxel: floa
 
     K_small = K.astype(np.float64).copy()
     K_small[:2] /= stride  # pixel (u, v) of the strided copy is (u*stride, v*stride) of the full image
-    K_small[0, 2] = K[0, 2] / stride
-    K_small[1, 2] = K[1, 2] / stride
     h, w = kfs[0].depth_small.shape  # type: ignore[union-attr]
     settings = cv2.VolumeSettings(cv2.VolumeType_ColorTSDF)
     for setter in (settings.setCameraIntegrateIntrinsics, settings.setCameraRaycastIntrinsics):
@@ -105,8 +103,6 @@ def fuse_tsdf(keyframes: list[KeyFrame], K: np.ndarray, stride: int, voxel: floa
         depth[:BORDER_PX] = depth[-BORDER_PX:] = 0  # the colour lookup of the outermost pixels falls off the
         depth[:, :BORDER_PX] = depth[:, -BORDER_PX:] = 0  # image in OpenCV (black voxels): integrate inside only
         if edge_rel > 0:
-            from worker.slam.mapping.dense import depth_edges
-
             depth[depth_edges(depth, edge_rel)] = 0
         # colour as float32 (h,w,3): OpenCV 5's coloured TSDF refuses uint8; the channel order is kept as given
         volume.integrateColor(depth, rgb.astype(np.float32), kf.T_WC.astype(np.float32))
