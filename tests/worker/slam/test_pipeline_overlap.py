@@ -37,6 +37,12 @@ def test_segmentation_ahead_gives_the_same_trajectory_and_map(people_seq, tmp_pa
     assert m1["stage_info"] == m0["stage_info"]
 
 
+def test_truth_masks_have_nothing_to_run_ahead(people_seq):
+    cfg = get_preset("no-restoration", {"segmentation": {"source": "truth"}})
+    res = run_pipeline(Sequence(people_seq, PRESETS["tum3"]), cfg, None, max_frames=5)
+    assert res.metrics["overlapped_stages"] == [] and res.metrics["stage_info"]["potentially_dynamic_fraction"] > 0
+
+
 def test_restoration_on_demand_gives_the_same_outputs_and_restores_fewer_frames(people_seq, tmp_path):
     for on_demand in (False, True):
         cfg = get_preset("full", {"restoration.on_demand": on_demand})
