@@ -6,14 +6,15 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 import uvicorn
 from fastapi import FastAPI
 
 
 @contextmanager
-def serve(app: FastAPI, **config: object) -> Iterator[str]:
-    """Run ``app`` until the block ends; yields its base URL."""
+def serve(app: FastAPI, **config: Any) -> Iterator[str]:
+    """Run ``app`` until the block ends; yields its base URL. ``config``: more ``uvicorn.Config`` arguments."""
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning", **config))
     thread = threading.Thread(target=server.run, name="live-api", daemon=True)
     thread.start()

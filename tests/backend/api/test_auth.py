@@ -13,7 +13,7 @@ import os
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -45,7 +45,9 @@ def api_routes(app: FastAPI) -> list[tuple[str, str, list[Any]]]:
     """
     out = []
     for route in app.routes:
-        contexts = route.effective_route_contexts() if hasattr(route, "effective_route_contexts") else [route]
+        # each a route or FastAPI's private route context: duck-typed, both have .methods and .path
+        contexts: Iterable[Any] = (route.effective_route_contexts() if hasattr(route, "effective_route_contexts")
+                                   else [route])
         for ctx in contexts:
             original = getattr(ctx, "original_route", ctx)
             if isinstance(original, APIRoute):
@@ -161,7 +163,7 @@ def test_the_right_token_works_on_every_mutating_route(secured, seq_tgz) -> None
         assert r.status_code == status, r.text
         return r.json() if r.content else {}
 
-    steps: dict[tuple[str, str], Callable[[], None]] = {
+    steps: dict[tuple[str, str], Callable[[], object]] = {
         ("POST", "/api/v1/sequences"): lambda: ids.update(seq=ok(upload(client, seq_tgz, headers=GOOD), 201)["id"]),
         ("POST", "/api/v1/sequences/import"): lambda: ids.update(imp=ok(client.post(
             "/api/v1/sequences/import", json={"path": "tum/seq_a", "camera": "tum1"}, headers=GOOD), 201)["id"]),

@@ -12,6 +12,7 @@ from typing import Any
 import anyio
 import pytest
 from fastapi.testclient import TestClient
+from starlette.types import Message, Scope
 
 from backend.app import create_app
 from storage.settings import Settings, get_settings
@@ -61,28 +62,28 @@ def _multipart_head(filename: str) -> bytes:
             "Content-Type: application/octet-stream\r\n\r\n").encode()
 
 
-def _abandoned_upload(client: TestClient, filename: str, archive: bytes) -> list[dict[str, Any]]:
+def _abandoned_upload(client: TestClient, filename: str, archive: bytes) -> list[Message]:
     """POST half of ``archive`` straight to the ASGI app, then the client's ``http.disconnect``."""
     head = _multipart_head(filename)
     half = archive[: len(archive) // 2]
     total = len(head) + len(archive) + len(BOUNDARY) + 8  # what a complete body would declare
-    messages: list[dict[str, Any]] = [
+    messages: list[Message] = [
         {"type": "http.request", "body": head, "more_body": True},
         {"type": "http.request", "body": half, "more_body": True},
         {"type": "http.disconnect"},
     ]
-    sent: list[dict[str, Any]] = []
+    sent: list[Message] = []
 
-    async def receive() -> dict[str, Any]:
+    async def receive() -> Message:
         if messages:
             return messages.pop(0)
         await anyio.sleep_forever()
         raise AssertionError("unreachable")
 
-    async def send(message: dict[str, Any]) -> None:
+    async def send(message: Message) -> None:
         sent.append(message)
 
-    scope = {
+    scope: Scope = {
         "type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST", "scheme": "http",
         "path": "/api/v1/sequences", "raw_path": b"/api/v1/sequences", "root_path": "", "query_string": b"",
         "headers": [(b"host", b"testserver"),

@@ -20,7 +20,7 @@ import tracemalloc
 import warnings
 import zipfile
 import zlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,6 +30,7 @@ import numpy as np
 import pytest
 import uvicorn
 from fastapi.testclient import TestClient
+from starlette.types import Message, Scope
 
 from backend.app import create_app
 from storage.settings import Settings, get_settings
@@ -81,7 +82,7 @@ def _entry(name: str, kind: bytes = tarfile.REGTYPE, **kw: Any) -> tarfile.TarIn
     return info
 
 
-def _zip(entries: list[tuple[str | zipfile.ZipInfo, bytes]], method: int = zipfile.ZIP_DEFLATED) -> bytes:
+def _zip(entries: Sequence[tuple[str | zipfile.ZipInfo, bytes]], method: int = zipfile.ZIP_DEFLATED) -> bytes:
     buf = io.BytesIO()
     with warnings.catch_warnings(), zipfile.ZipFile(buf, "w", method) as zf:
         warnings.simplefilter("ignore")  # duplicate names
@@ -459,17 +460,18 @@ def test_disconnect_mid_upload_is_a_clear_422() -> None:
         boundary = "b"
         part = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"s.tgz\"\r\n\r\n"
                 ).encode() + b"\x1f\x8b" + bytes(1000)
-        messages = [{"type": "http.request", "body": part, "more_body": True}, {"type": "http.disconnect"}]
-        sent: list[dict[str, Any]] = []
+        messages: list[Message] = [{"type": "http.request", "body": part, "more_body": True},
+                                    {"type": "http.disconnect"}]
+        sent: list[Message] = []
 
-        async def receive() -> dict[str, Any]:
+        async def receive() -> Message:
             return messages.pop(0) if messages else {"type": "http.disconnect"}
 
-        async def send(message: dict[str, Any]) -> None:
+        async def send(message: Message) -> None:
             sent.append(message)
 
         async def run() -> None:
-            scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST",
+            scope: Scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST",
                      "scheme": "http", "path": "/api/v1/sequences", "raw_path": b"/api/v1/sequences",
                      "root_path": "", "query_string": b"", "client": ("127.0.0.1", 1), "server": ("x", 80),
                      "headers": [(b"content-type", f"multipart/form-data; boundary={boundary}".encode()),

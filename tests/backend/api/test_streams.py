@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections.abc import Generator
 
 import httpx
 import pytest
@@ -40,6 +41,7 @@ def _open_stream(stack: contextlib.ExitStack, client: httpx.Client, job_id: str)
     r = stack.enter_context(client.stream("GET", f"/api/v1/jobs/{job_id}/events?interval=0.1"))
     if r.status_code == 200:
         chunks = r.iter_raw()
+        assert isinstance(chunks, Generator)  # httpx's is one; only a generator can be closed before its end
         next(chunks)  # the stream is live (its first event arrived)
         stack.callback(chunks.close)  # a dropped iterator would close the connection at once
     return r.status_code
