@@ -6,13 +6,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_import_contracts_hold():
+def test_import_contracts_hold() -> None:
     exe = Path(sys.executable).with_name("lint-imports")
     res = subprocess.run([str(exe), "--no-cache"], cwd=ROOT, capture_output=True, text=True)
     assert res.returncode == 0, res.stdout + res.stderr
 
 
-def test_api_process_does_not_import_heavy_modules():
+def test_api_process_does_not_import_heavy_modules() -> None:
     code = ("import sys; from backend.app import create_app; "
             "bad = [m for m in ('torch', 'cv2', 'worker', 'evo') if m in sys.modules]; print(bad)")
     res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
@@ -20,7 +20,7 @@ def test_api_process_does_not_import_heavy_modules():
     assert res.stdout.strip() == "[]"
 
 
-def test_pure_pipeline_imports_only_itself():
+def test_pure_pipeline_imports_only_itself() -> None:
     """worker/slam imports none of ours but itself and formats (import-linter cannot name not-yet-existing
     siblings, so every top-level package of the repository counts as ours)."""
     import ast
@@ -41,7 +41,7 @@ def test_pure_pipeline_imports_only_itself():
     assert not offenders, offenders
 
 
-def test_no_folder_imports_a_folder_that_imports_it_back():
+def test_no_folder_imports_a_folder_that_imports_it_back() -> None:
     """Folders (packages) form no import cycle, lazy imports included. The files directly in worker/ and
     worker/slam/ are floors of their own (DESIGN.md), so there each file counts alone; a package and its own
     sub-packages are one family and not compared."""

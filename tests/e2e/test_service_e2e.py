@@ -14,7 +14,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import httpx
@@ -120,7 +120,7 @@ def _interrupted_upload(svc: Service, archive: Path) -> None:
     assert not any(staging.glob("upload-*")), list(staging.rglob("*"))[:10]
 
 
-def _flow(svc: Service, tmp_path: Path, db_rows) -> None:
+def _flow(svc: Service, tmp_path: Path, db_rows: Callable[[str], tuple[float | None, int]]) -> None:
     small = tar_gz(write_sequence(tmp_path / "small", n=20), tmp_path / "small.tgz", top="rgbd_small")
     large = tar_gz(write_sequence(tmp_path / "large", n=400), tmp_path / "large.tgz", top="rgbd_large")
     with httpx.Client(base_url=svc.url, timeout=60) as client:
@@ -191,7 +191,7 @@ def sqlite_service(tmp_path: Path) -> Iterator[Service]:
 def test_embedded_default_sqlite(sqlite_service: Service, tmp_path: Path):
     import sqlite3
 
-    def rows(job_id: str):
+    def rows(job_id: str) -> tuple[float | None, int]:
         with sqlite3.connect(tmp_path / "data" / "vtdslam.db") as db:
             (ate,) = db.execute("SELECT ate_rmse FROM run_metrics WHERE job_id = ?", (job_id,)).fetchone()
             (n,) = db.execute("SELECT count(*) FROM frame_stats WHERE job_id = ?", (job_id,)).fetchone()
@@ -252,11 +252,12 @@ def test_scaled_out_postgres_and_redis(scaled_service, tmp_path: Path):
 
     svc, db_url = scaled_service
 
-    def rows(job_id: str):
+    def rows(job_id: str) -> tuple[float | None, int]:
         with psycopg.connect(db_url) as conn:
-            (ate,) = conn.execute("SELECT ate_rmse FROM run_metrics WHERE job_id = %s", (job_id,)).fetchone()
-            (n,) = conn.execute("SELECT count(*) FROM frame_stats WHERE job_id = %s", (job_id,)).fetchone()
-        return ate, n
+            metrics = conn.execute("SELECT ate_rmse FROM run_metrics WHERE job_id = %s", (job_id,)).fetchone()
+            count = conn.execute("SELECT count(*) FROM frame_stats WHERE job_id = %s", (job_id,)).fetchone()
+        assert metrics is not None and count is not None, "the finished job has no run_metrics row"
+        return metrics[0], count[0]
 
     _flow(svc, tmp_path, rows)
     assert not (tmp_path / "data" / "vtdslam.db").exists() and not (tmp_path / "data" / "queue.db").exists()

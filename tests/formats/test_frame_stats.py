@@ -14,8 +14,9 @@ from formats.frame_stats import (
 
 
 def test_pipeline_columns_first_then_the_rest_sorted(tmp_path: Path):
-    rows = [{"frame_index": 0, "timestamp": 1.5, "tracked": True, "zeta": 1, "alpha": None},
-            {"frame_index": 1, "timestamp": 1.6, "tracked": False, "ate_error": 0.01}]
+    rows: list[dict[str, object]] = [
+        {"frame_index": 0, "timestamp": 1.5, "tracked": True, "zeta": 1, "alpha": None},
+        {"frame_index": 1, "timestamp": 1.6, "tracked": False, "ate_error": 0.01}]
     write_frame_stats(tmp_path / "f.csv", rows)
     raw = (tmp_path / "f.csv").read_bytes()
     assert raw.startswith(",".join([*PIPELINE_COLUMNS, "alpha", "zeta"]).encode() + b"\r\n")

@@ -113,6 +113,12 @@ def job(client: Any, job_id: str) -> dict[str, Any]:
     return r.json()
 
 
+def final_job(client: Any, job_id: str) -> dict[str, Any] | None:
+    """The job once it has reached a FINAL status, else None (a ``wait_for`` check)."""
+    j = job(client, job_id)
+    return j if j["status"] in FINAL else None
+
+
 def healthy(client: Any) -> bool:
     r = client.get("/api/v1/health")
     return r.status_code == 200 and r.json()["database"] == "ok"

@@ -43,7 +43,9 @@ def config(tmp_path_factory: pytest.TempPathFactory) -> dict:
     out = subprocess.run([*cli, "config"], cwd=folder, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     # docker-compose v1 prints YAML only; it is a Python program, so its interpreter has PyYAML.
-    interpreter = Path(shutil.which("docker-compose")).read_text().splitlines()[0].removeprefix("#!").strip()
+    script = shutil.which("docker-compose")
+    assert script is not None  # _compose_cli chose it
+    interpreter = Path(script).read_text().splitlines()[0].removeprefix("#!").strip()
     conv = subprocess.run([interpreter, "-c", "import json, sys, yaml; print(json.dumps(yaml.safe_load(sys.stdin)))"],
                           input=out.stdout, capture_output=True, text=True)
     assert conv.returncode == 0, conv.stderr

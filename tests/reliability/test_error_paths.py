@@ -24,6 +24,7 @@ def test_job_error_and_log_hold_no_absolute_server_path(tmp_path: Path) -> None:
     assert execute_job(ctx, job_id) == JobStatus.FAILED
     with ctx.session_factory() as s:
         message = jobs.get(s, job_id).error
+    assert message is not None
     log = ctx.store.path(job_id, "log.txt").read_text()
     assert "'sequences/ab12/rgb/1.png'" in message and str(tmp_path) not in message
     assert "sequences/ab12/rgb/1.png" in log and "Traceback" in log

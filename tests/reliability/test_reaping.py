@@ -78,7 +78,7 @@ def _dead_worker_job(ctx: WorkerContext, job_id: str, worker: str) -> Path:
 
 @pytest.mark.parametrize("path", ["orphan", "stale"])
 @pytest.mark.parametrize("requeue", [0, 1])
-def test_dead_workers_job_is_failed_or_requeued_with_its_files_removed(tmp_path, path, requeue):
+def test_dead_workers_job_is_failed_or_requeued_with_its_files_removed(tmp_path: Path, path: str, requeue: int) -> None:
     settings = get_settings(data_dir=tmp_path / "data", requeue_orphans=requeue)
     queue: list[str] = []
     ctx = _ctx(settings, "w1", enqueue=queue.append)
@@ -106,7 +106,7 @@ def test_dead_workers_job_is_failed_or_requeued_with_its_files_removed(tmp_path,
         assert ("stopped before" if path == "orphan" else "stopped reporting") in got.error
 
 
-def test_only_the_own_names_orphans_and_only_stale_jobs_are_reaped(settings):
+def test_only_the_own_names_orphans_and_only_stale_jobs_are_reaped(settings: Settings) -> None:
     ctx = _ctx(settings, "w1")
     mine, other = _job(ctx), _job(ctx)
     with ctx.session_factory() as s:
@@ -116,7 +116,7 @@ def test_only_the_own_names_orphans_and_only_stale_jobs_are_reaped(settings):
     assert _get(ctx, other).status == JobStatus.RUNNING
 
 
-def test_a_reaped_zombie_stores_nothing_and_does_not_touch_the_new_attempt(settings):
+def test_a_reaped_zombie_stores_nothing_and_does_not_touch_the_new_attempt(settings: Settings) -> None:
     """The reaper requeued the job while its (slow, not dead) worker went on: when that worker gets to
     saving, it must notice and store nothing, and its finish must not end the new attempt."""
     ctx = _ctx(settings, "zombie")
@@ -136,7 +136,7 @@ def test_a_reaped_zombie_stores_nothing_and_does_not_touch_the_new_attempt(setti
         assert metrics.get_frame_stats(s, job_id) == []
 
 
-def test_a_reaped_zombie_leaves_a_failed_job_failed_and_empty(settings):
+def test_a_reaped_zombie_leaves_a_failed_job_failed_and_empty(settings: Settings) -> None:
     ctx = _ctx(settings, "zombie")
     job_id = _job(ctx)
 
@@ -151,7 +151,7 @@ def test_a_reaped_zombie_leaves_a_failed_job_failed_and_empty(settings):
     assert ctx.store.list(job_id) == []
 
 
-def test_a_live_job_in_a_silent_stage_is_not_taken_for_dead(tmp_path):
+def test_a_live_job_in_a_silent_stage_is_not_taken_for_dead(tmp_path: Path) -> None:
     """The pipeline reports nothing for 2.5 heartbeat timeouts (a long final BA) while another worker's
     reaper runs: the job's heartbeat keeps it alive and it succeeds."""
     settings = get_settings(data_dir=tmp_path / "data", heartbeat_timeout_s=1.0)
@@ -165,7 +165,7 @@ def test_a_live_job_in_a_silent_stage_is_not_taken_for_dead(tmp_path):
         reaper.stopping.set()
 
 
-def test_worker_names_are_unique_among_live_workers(tmp_path):
+def test_worker_names_are_unique_among_live_workers(tmp_path: Path) -> None:
     data = tmp_path / "data"
     first = claim_name(data)
     second = claim_name(data)
@@ -181,7 +181,7 @@ def test_worker_names_are_unique_among_live_workers(tmp_path):
         held.release()
 
 
-def test_reaper_thread_stops_with_the_worker(settings):
+def test_reaper_thread_stops_with_the_worker(settings: Settings) -> None:
     ctx = _ctx(settings, "w1")
     thread = start_reaper(ctx, 0.2)
     ctx.stopping.set()
@@ -189,7 +189,7 @@ def test_reaper_thread_stops_with_the_worker(settings):
     assert not thread.is_alive()
 
 
-def test_two_reapers_racing_requeue_a_job_once(tmp_path):
+def test_two_reapers_racing_requeue_a_job_once(tmp_path: Path) -> None:
     settings = get_settings(data_dir=tmp_path / "data", requeue_orphans=1)
     queue: list[str] = []
     ctxs = [_ctx(settings, f"r{i}", enqueue=queue.append) for i in range(4)]
@@ -210,7 +210,7 @@ def test_two_reapers_racing_requeue_a_job_once(tmp_path):
 
 
 @pytest.mark.parametrize("path", ["orphan", "stale"])
-def test_a_job_whose_worker_died_twice_is_a_poison_job(tmp_path, path):
+def test_a_job_whose_worker_died_twice_is_a_poison_job(tmp_path: Path, path: str) -> None:
     """However many requeues the deployment allows, the second death fails the job as a poison job (one
     setting that crashes the pipeline would kill every worker); only an explicit retry queues it again."""
     settings = get_settings(data_dir=tmp_path / "data", requeue_orphans=5)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import re
 from collections import Counter
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -17,7 +18,7 @@ from storage.settings import Settings, get_settings
 from tests.backend.api.data import write_sequence
 from tests.backends import scaled_urls
 from tests.reliability.conftest import api_client
-from tests.reliability.procs import FINAL, Procs, clean_env, job, submit, upload, wait_for
+from tests.reliability.procs import Procs, clean_env, final_job, submit, upload, wait_for
 
 JOBS = 10
 FRAMES = 60
@@ -33,6 +34,7 @@ def scaled(tmp_path: Path) -> Iterator[Settings]:
 
 
 def test_two_workers_on_redis_and_postgres_run_a_batch_once_each(scaled: Settings, procs: Procs, tmp_path):
+    assert scaled.database_url and scaled.queue_url  # the fixture sets both
     env = clean_env(VTD_DATA_DIR=str(scaled.data_dir), VTD_DATABASE_URL=scaled.database_url,
                     VTD_QUEUE_URL=scaled.queue_url)
     with api_client(scaled) as client:
@@ -43,8 +45,8 @@ def test_two_workers_on_redis_and_postgres_run_a_batch_once_each(scaled: Setting
         assert len(set(names)) == 2, names
 
         ids = [submit(client, seq["id"]) for _ in range(JOBS)]
-        done = {j: wait_for(f"job {j}", lambda j=j: (x := job(client, j))["status"] in FINAL and x,
-                            timeout=180, context=procs.tails) for j in ids}
+        done = {j: wait_for(f"job {j}", partial(final_job, client, j), timeout=180, context=procs.tails)
+                for j in ids}
         for w in workers:
             assert procs.stop(w) == 0, procs.tails()
 

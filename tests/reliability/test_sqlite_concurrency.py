@@ -52,7 +52,9 @@ class WorkerLike(threading.Thread):
         register_run_job(self.huey)  # so dequeued messages deserialise to the task
         self.engine = make_engine(settings)
         self.sessions = make_session_factory(self.engine)
-        self.stop, self.errors, self.done, self.writes = stop, [], set(), 0
+        self.stop, self.writes = stop, 0
+        self.errors: list[str] = []  # repr of what stopped the loop
+        self.done: set[str] = set()  # job ids finished
 
     def run(self) -> None:
         try:

@@ -6,6 +6,7 @@ from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import Engine, inspect, text
+from sqlalchemy.orm import Session, sessionmaker
 
 from storage.db import alembic_config, init_db, make_engine, make_session_factory, normalize_url
 from storage.errors import ConfigurationError
@@ -114,7 +115,7 @@ def test_concurrent_init_db(db_settings: Settings) -> None:
     assert errors == []
 
 
-def test_session_objects_survive_commit(session_factory) -> None:  # type: ignore[no-untyped-def]
+def test_session_objects_survive_commit(session_factory: sessionmaker[Session]) -> None:
     from storage.models import Sequence
 
     with session_factory() as s:

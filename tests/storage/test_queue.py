@@ -1,4 +1,5 @@
 import uuid
+from pathlib import Path
 
 import pytest
 from huey import Huey, RedisHuey, SqliteHuey
@@ -33,7 +34,7 @@ def test_default_is_sqlite_file_in_data_dir(settings: Settings) -> None:
     assert worker.execute(task) == 3
 
 
-def test_sqlite_url(settings: Settings, tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_sqlite_url(settings: Settings, tmp_path: Path) -> None:
     path = tmp_path / "q" / "jobs.db"
     huey = make_huey(settings.model_copy(update={"queue_url": f"sqlite:///{path}"}))
     assert isinstance(huey, SqliteHuey) and huey.storage.filename == str(path)

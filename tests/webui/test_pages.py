@@ -36,7 +36,8 @@ class FakeHub:
     """A stand-in for `vtdslam viewer`'s control API: answers GET /runs/{id} like the real hub."""
 
     def __init__(self, status: int = 200, body: dict | None = None, delay_s: float = 0.0) -> None:
-        self.status, self.body, self.delay_s, self.paths = status, body, delay_s, []
+        self.status, self.body, self.delay_s = status, body, delay_s
+        self.paths: list[str] = []  # request paths, in arrival order
         hub = self
 
         class Handler(BaseHTTPRequestHandler):
