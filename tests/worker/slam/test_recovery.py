@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -19,7 +20,7 @@ CAM = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, name="synthetic")
 BEHIND = pose([0.1, 0.0, 0.2], 180)  # the opposite wall: nothing the first frames saw
 
 
-def _tracking(cfg: PipelineConfig, **changes: object) -> PipelineConfig:
+def _tracking(cfg: PipelineConfig, **changes: Any) -> PipelineConfig:
     return replace(cfg, tracking=replace(cfg.tracking, **changes))
 
 

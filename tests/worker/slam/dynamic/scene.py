@@ -43,8 +43,9 @@ def render(T_WC: np.ndarray, board_x: float, wall_tex: np.ndarray, board_tex: np
     return out_rgb, depth, on_board
 
 
-def orb(rgb: np.ndarray, n: int = 1500):
-    kps, desc = cv2.ORB_create(n).detectAndCompute(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY), None)
+def orb(rgb: np.ndarray, n: int = 1500) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 2) keypoint positions and their (N, 32) ORB descriptors."""
+    kps, desc = cv2.ORB.create(n).detectAndCompute(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY), None)
     return np.array([k.pt for k in kps], np.float64).reshape(-1, 2), desc
 
 

@@ -22,6 +22,7 @@ def test_a_box_that_stays_is_kept_even_where_the_mask_removed_it() -> None:
     # depth still sees it, so nothing is seen through
     kfs = [_kf(i, 0.02 * i, box=True) for i in range(8)]
     for kf in kfs[2:]:
+        assert kf.depth_small is not None  # _kf keeps its dense images
         kf.depth_small = np.where(kf.depth_small < 1.5, 0, kf.depth_small).astype(np.float32)
     xyz, rgb = fuse_keyframes(kfs, K, STRIDE, 0.01, 4.0)
     kept, _ = carve(xyz, rgb, kfs, K, STRIDE)

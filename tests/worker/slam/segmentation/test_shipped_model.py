@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import cast
 
 import cv2
 import numpy as np
@@ -34,7 +35,7 @@ def test_shipped_msnet_person_iou_on_walking_xyz(shared: Path) -> None:
     if rgb_path is None or mask_path is None:
         pytest.skip(f"walking_xyz frame or mask missing in {folder}")
     rgb = read_rgb(rgb_path)
-    gt = tum_person_mask(cv2.imread(str(mask_path), cv2.IMREAD_UNCHANGED))
+    gt = tum_person_mask(cast(np.ndarray, cv2.imread(str(mask_path), cv2.IMREAD_UNCHANGED)))  # None: unreadable
     ious = {}
     for radius in (0, CHOSEN_RADIUS):
         res = make_segmenter(SegmenterConfig(device="cpu", guided_radius=radius)).segment(rgb)
