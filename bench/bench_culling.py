@@ -40,6 +40,8 @@ def main() -> None:
     ap.add_argument("--lag", type=int, default=10)
     args = ap.parse_args()
     seq, truth = Sequence(args.sequence, parse_camera(args.camera)), load_truth(args.sequence)
+    if truth is None:
+        ap.error(f"{args.sequence} has no truth (make one with `vtdslam augment` or `vtdslam synth`)")
     extractor = OrbExtractor(PipelineConfig().features)
     gt_idx, gt_poses = seq.groundtruth_for_frames()
     pose = dict(zip(gt_idx.tolist(), gt_poses))

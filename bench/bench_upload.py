@@ -80,7 +80,8 @@ def _status(pid: int, key: str) -> int:
 class RssSampler(threading.Thread):
     def __init__(self, pid: int) -> None:
         super().__init__(daemon=True)
-        self.pid, self.samples, self.done = pid, [], threading.Event()
+        self.pid, self.done = pid, threading.Event()
+        self.samples: list[int] = []  # resident bytes, one every 20 ms
 
     def run(self) -> None:
         while not self.done.is_set():
