@@ -114,5 +114,9 @@ def fuse_tsdf(keyframes: list[KeyFrame], K: np.ndarray, stride: int, voxel: floa
     # a surface voxel no colour sample reached (silhouette rims) comes back black (< 1 of 255); a blended real
     # colour is never that dark in all three channels, so those are dropped rather than drawn as black specks
     coloured = rgb_out.max(axis=1) >= 1.0
-    return (np.ascontiguousarray(xyz[coloured]),
-            np.clip(rgb_out[coloured] + 0.5, 0, 255).astype(np.uint8))
+    xyz, rgb_out = xyz[coloured], rgb_out[coloured]
+    # the volume is fetched in parallel, so its point order varies run to run: sort (x, then y, then z) so that
+    # the same keyframes always write the same map.ply
+    order = np.lexsort((xyz[:, 2], xyz[:, 1], xyz[:, 0]))
+    return (np.ascontiguousarray(xyz[order]),
+            np.clip(rgb_out[order] + 0.5, 0, 255).astype(np.uint8))

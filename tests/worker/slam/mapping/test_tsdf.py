@@ -54,6 +54,15 @@ def test_a_surface_every_view_sees_stays() -> None:
     assert not (rgb == 0).all(1).any()  # no black specks where no colour sample reached
 
 
+def test_points_come_in_a_reproducible_order() -> None:
+    kfs = [_kf(i, 0.02 * i, box=True) for i in range(4)]
+    xyz, rgb = fuse_tsdf(kfs, K, STRIDE, 0.01, 4.0)
+    order = np.lexsort((xyz[:, 2], xyz[:, 1], xyz[:, 0]))
+    assert np.array_equal(order, np.arange(len(xyz)))  # sorted by x, then y, then z (the volume's fetch is not)
+    again, rgb_again = fuse_tsdf(kfs, K, STRIDE, 0.01, 4.0)
+    assert np.array_equal(xyz, again) and np.array_equal(rgb, rgb_again)
+
+
 def test_no_depth_gives_an_empty_map() -> None:
     kf = _kf(0, 0.0, box=False)
     kf.depth_small = np.zeros_like(kf.depth_small)
