@@ -167,6 +167,19 @@ def test_geometry_only_leaves_static_scene_alone():
     assert res.removed(kp).mean() < 0.02
 
 
+def test_a_pnp_that_opencv_refuses_skips_the_depth_test_not_the_frame(monkeypatch):
+    """SQPnP asserts (point_coordinate_variance) on some real samples (seen on bonn_crowd_dev): the depth test
+    is skipped for that frame, F still decides, and the run goes on."""
+    import worker.slam.dynamic.culling as culling
+
+    def refuse(*_args, **_kwargs):
+        raise cv2.error("point_coordinate_variance >= POINT_VARIANCE_THRESHOLD")
+
+    monkeypatch.setattr(culling.cv2, "solvePnPRansac", refuse)
+    res, kp, truth = run(0.06)
+    assert any(s.dynamic and s.kind == "semantic" for s in res.segments)
+
+
 def test_depth_catches_motion_along_the_epipolar_line():
     """The camera moves along x and so does the board: F alone cannot see it, reprojection with depth can."""
     T0, T1 = pose(0.0), pose(0.03)
