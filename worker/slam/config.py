@@ -73,6 +73,14 @@ class TrackingConfig:
     """Motion-only BA rounds; outliers are re-classified after each round."""
     ba_iterations: int = valid(8, 1, 1_000)
     """Gauss-Newton iterations per round."""
+    established_frames: int = valid(10, 0, 100_000)
+    """Each pose is also solved with every match weighted by how established its map point is: matched in n
+    frames, weight min(n / N, 1), at least 1 / N. That pose replaces the plain one when they differ by more than
+    `established_disagree_m` (people walking together outnumbering the static matches drag the plain solve;
+    points that kept still for many frames do not move with them). 0 = off (README, "Settings chosen by
+    measurement")."""
+    established_disagree_m: float = valid(0.01, 0.0, 10.0)
+    """Translation between the plain and the weighted pose beyond which the weighted one is taken."""
     local_map_keyframes: int = valid(12, 1, 1_000)
     """Covisible keyframes whose points form the local map."""
     keyframe_max_frames: int = valid(20, 1, 100_000)

@@ -67,6 +67,23 @@ def test_pnp_and_motion_only_ba_recover_known_pose_with_outliers():
     assert pose_entropy(half.covariance) > pose_entropy(C)
 
 
+def test_prior_weights_let_a_minority_of_established_points_win():
+    """Three fifths of the matches sit on things that moved 6 cm together since they were mapped (people walking
+    side by side): the plain solve follows them; weighting them 0.1 (new points) against 1 (points matched in
+    many frames) recovers the static pose."""
+    rng = np.random.default_rng(3)
+    T_WC, X, uv, z = _scene(rng, 250)
+    moved = np.arange(len(X)) < 150
+    X_map = X.copy()
+    X_map[moved] += np.array([0.06, 0.0, 0.0])  # where the map put them: they have moved since
+    plain = optimize_pose(T_WC, X_map, uv, z, np.ones(len(X)), K_SYN, bf=525 * 0.08)
+    weighted = optimize_pose(T_WC, X_map, uv, z, np.ones(len(X)), K_SYN, bf=525 * 0.08,
+                             weights=np.where(moved, 0.1, 1.0))
+    assert pose_distance(plain.T_WC, T_WC)[0] > 0.04  # dragged by the majority
+    assert pose_distance(weighted.T_WC, T_WC)[0] < 0.005
+    assert weighted.inliers[~moved].mean() > 0.9 and weighted.inliers[moved].mean() < 0.1
+
+
 def test_keyframe_policy():
     cfg = TrackingConfig()
     base = dict(frames_since_kf=5, tracked=400, ref_tracked=400, close_tracked=300, close_untracked=10)

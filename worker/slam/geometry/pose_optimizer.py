@@ -2,7 +2,9 @@
 
 As ORB-SLAM2's PoseOptimization: several rounds; after each round observations whose chi-square exceeds the
 95% threshold (7.815 with depth, 5.991 without) are set aside, and the robust kernel is dropped for the last
-rounds. The pose covariance comes from the Gauss-Newton normal equations at the solution.
+rounds. The pose covariance comes from the Gauss-Newton normal equations at the solution. Optional prior weights
+per match (how far its map point is to be trusted) scale each residual's weight in the solve; the outlier tests
+and the covariance ignore them.
 """
 from __future__ import annotations
 
@@ -37,10 +39,11 @@ class PoseEstimate:
 
 def optimize_pose(T_WC: np.ndarray, X_w: np.ndarray, uv: np.ndarray, z: np.ndarray, info: np.ndarray,
                   K: np.ndarray, bf: float, huber_px: float = 2.45, rounds: int = 4,
-                  iterations: int = 8) -> PoseEstimate:
+                  iterations: int = 8, weights: np.ndarray | None = None) -> PoseEstimate:
     """Refine `T_WC` from (N,3) world points `X_w` seen at (N,2) pixels `uv` with (N,) depths `z` (0 = none).
 
     `info` (N,) inverse variance of each keypoint (1/scale^2 of its octave). `bf` = fx * virtual baseline.
+    `weights` (N,) prior weight of each match in (0, 1], multiplying the robust weights (None = all 1).
     """
     n = len(X_w)
     T_CW = inv(T_WC)
@@ -59,6 +62,8 @@ def optimize_pose(T_WC: np.ndarray, X_w: np.ndarray, uv: np.ndarray, z: np.ndarr
             e = (obs - rp.project(np.where(Pc[:, 2:3] > 1e-3, Pc, 1.0), K, bf)) * roww
             chi2 = info * (e**2).sum(1)
             w = info * (rp.huber_weights(chi2, huber_px) if robust else 1.0)
+            if weights is not None:
+                w = w * weights
             w = np.where(good, w, 0.0)
             J = rp.jacobian_pose(Pc, rp.jacobian_point(Pc, K, bf)) * roww[:, :, None]
             Jf = J.reshape(-1, 6)

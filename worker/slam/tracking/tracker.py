@@ -53,6 +53,8 @@ class Tracker:
         self.last_kf_frame = -1
         self.last_point_ids = np.zeros(0, np.int64)
         self.lost_streak = 0
+        #: Frames whose final pose solve took the established points' pose (`established_frames`).
+        self.established_switches = 0
         #: First keyframe id of every map not merged into an older one (maps after a loss continue the ids).
         self.map_starts = [0]
         #: The last successfully tracked frame's result (the pipeline hands its pose to the stages).
@@ -193,7 +195,7 @@ class Tracker:
                 continue
             self.local_kfs = [kf_id] + self.map.best_covisible(kf_id, self.tc.local_map_keyframes - 1)
             self.last_point_ids = np.zeros(0, np.int64)
-            est, _ = self._track_local_map(res.feats, got[0], wide=False)
+            est, _ = self._track_local_map(res.feats, got[0], frame_to_frame=False)
             if est is None:
                 continue
             old_local = self.local_kfs
@@ -223,26 +225,48 @@ class Tracker:
                                     self.K, (self.camera.width, self.camera.height), self.extractor.scales,
                                     radius, self.tc.max_hamming, self.tc.ratio)
 
-    def _optimize(self, feats: Features, ids: np.ndarray, kp: np.ndarray, T_WC: np.ndarray) -> PoseEstimate:
-        return optimize_pose(T_WC, self.map.points.pos[ids], feats.uv[kp], feats.depth[kp],
-                             self.extractor.inv_sigma2[feats.octave[kp]], self.K, self.bf, self.tc.huber_px,
-                             self.tc.ba_rounds, self.tc.ba_iterations)
+    def _optimize(self, feats: Features, ids: np.ndarray, kp: np.ndarray, T_WC: np.ndarray,
+                  established: bool) -> tuple[PoseEstimate, bool]:
+        """Motion-only BA of the matches of keypoints `kp` to map points `ids`; with `established`, see
+        `established_frames` (frame to frame tracking only: a relocalisation's PnP has already chosen among
+        the hypotheses, and an older map's points are in that map's frame). Returns (estimate, whether the
+        established points' pose was taken)."""
+        def solve(weights: np.ndarray | None = None) -> PoseEstimate:
+            return optimize_pose(T_WC, self.map.points.pos[ids], feats.uv[kp], feats.depth[kp],
+                                 self.extractor.inv_sigma2[feats.octave[kp]], self.K, self.bf, self.tc.huber_px,
+                                 self.tc.ba_rounds, self.tc.ba_iterations, weights)
+
+        est = solve()
+        n = self.tc.established_frames
+        if n <= 0 or not established:
+            return est, False
+        # People walking together can outnumber the static matches: the plain solve then follows them. Points
+        # matched in many frames have kept still so far; if the pose they favour differs, trust them. Points of
+        # an older map not merged yet are in that map's frame, not this one's: they count as new.
+        p = self.map.points
+        found = np.where(p.first_kf[ids] >= self.map_starts[-1], p.found[ids], 1)
+        weighted = solve(np.clip(found / n, 1.0 / n, 1.0))
+        if np.linalg.norm(weighted.T_WC[:3, 3] - est.T_WC[:3, 3]) > self.tc.established_disagree_m:
+            return weighted, True
+        return est, False
 
     def _track_local_map(self, feats: Features, T_pred: np.ndarray,
-                         wide: bool = True) -> tuple[PoseEstimate | None, np.ndarray]:
-        """Coarse search + BA from the prediction, then a fine search over the local map + BA."""
+                         frame_to_frame: bool = True) -> tuple[PoseEstimate | None, np.ndarray]:
+        """Coarse search + BA from the prediction, then a fine search over the local map + BA. Frame to frame
+        tracking also searches a wider window and weighs established points; relocalisation and merging start
+        from a PnP pose and do neither."""
         none = (None, np.full(len(feats), -1, np.int64))
         if len(feats) < self.tc.min_matches:
             return none
         index = KeypointIndex(feats)
         ids = self._local_points()
         est = None
-        radii = [self.tc.search_radius_px] + ([self.tc.search_radius_px * 3] if wide else [])
+        radii = [self.tc.search_radius_px] + ([self.tc.search_radius_px * 3] if frame_to_frame else [])
         for r in radii:
             m = self._search(index, ids, T_pred, r)
             if len(m.kp_idx) < self.tc.min_matches:
                 continue
-            est = self._optimize(feats, ids[m.point_idx], m.kp_idx, T_pred)
+            est, _ = self._optimize(feats, ids[m.point_idx], m.kp_idx, T_pred, frame_to_frame)
             if est.n_inliers >= self.tc.min_matches:
                 break
             est = None
@@ -251,9 +275,10 @@ class Tracker:
         m = self._search(index, ids, est.T_WC, self.tc.refine_radius_px)
         if len(m.kp_idx) < self.tc.min_matches:
             return none
-        est = self._optimize(feats, ids[m.point_idx], m.kp_idx, est.T_WC)
+        est, switched = self._optimize(feats, ids[m.point_idx], m.kp_idx, est.T_WC, frame_to_frame)
         if est.n_inliers < self.tc.min_matches:
             return none
+        self.established_switches += int(switched)
         p = self.map.points
         p.visible[ids[m.visible]] += 1
         good_ids = ids[m.point_idx[est.inliers]]
@@ -288,7 +313,7 @@ class Tracker:
             self.ref_kf = kf_id
             self.local_kfs = [kf_id] + self.map.best_covisible(kf_id, self.tc.local_map_keyframes - 1)
             self.last_point_ids = np.zeros(0, np.int64)
-            est, pids = self._track_local_map(feats, got[0], wide=False)
+            est, pids = self._track_local_map(feats, got[0], frame_to_frame=False)
             if est is not None:
                 return est, pids
             self.ref_kf, self.local_kfs, self.last_point_ids = saved
