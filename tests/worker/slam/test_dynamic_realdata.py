@@ -4,6 +4,8 @@ The whole pipeline runs as shipped (MSNET, guided culling); the augmented people
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from worker.slam.augment.generator import AugmentConfig, generate_augmented
@@ -27,19 +29,27 @@ def augmented(redkitchen, shared, tmp_path_factory):
     return root
 
 
-def _run(seq: Sequence, preset: str, out) -> dict:
-    return run_pipeline(seq, get_preset(preset), out, max_frames=FRAMES).metrics
+def _run(seq: Sequence, preset: str, out, established_frames: int | None = None) -> dict:
+    cfg = get_preset(preset)
+    if established_frames is not None:
+        cfg = replace(cfg, tracking=replace(cfg.tracking, established_frames=established_frames))
+    return run_pipeline(seq, cfg, out, max_frames=FRAMES).metrics
 
 
 def test_culling_removes_real_people_and_saves_tracking(augmented, tmp_path):
     seq = Sequence(augmented)
-    plain = _run(seq, "orb-only", tmp_path / "orb")
-    culled = _run(seq, "no-restoration", tmp_path / "cull")
+    # culling's own effect, with the plain tracker (no weighing of established points)
+    plain = _run(seq, "orb-only", tmp_path / "orb", established_frames=0)
+    culled = _run(seq, "no-restoration", tmp_path / "cull", established_frames=0)
     # measured 0.214 m without culling; with it 0.0085 m before `prediction_veto` and 0.067 m with it (MSNET
     # misses most of one person here, ~35 % of the kept features are on them, and one 10-frame window jumps).
     # The veto stays on by the wider evidence: eight 300-frame seeds, mean ATE 0.088 -> 0.041 m, two tracking
     # losses rescued; all 1000 frames 0.046 -> 0.039 m (bench/run_all.sh). Culling must still cut ATE by half.
     assert culled["ate"]["rmse"] < 0.5 * plain["ate"]["rmse"]
+    # as shipped, established points also keep orb-only on the static scene here: measured 0.0076 m orb-only,
+    # 0.0081 m no-restoration (2026-12-03)
+    shipped = _run(seq, "no-restoration", tmp_path / "shipped")
+    assert shipped["ate"]["rmse"] < 0.02
     truth = culled["culling"]["truth"]
     assert truth["feature_precision"] >= 0.7 and truth["feature_recall"] >= 0.6  # measured 0.79 / 0.70
     c = culled["culling"]
