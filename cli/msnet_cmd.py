@@ -22,6 +22,7 @@ def _shared_default() -> str:
 
 def train_command(
     config: Annotated[str, typer.Option(help="Preset (cpu-tum = the shipped recipe, cpu-real = real people at scale, "
+                                             "cpu-tum-ft and cpu-real-tum-ft = fine-tunes needing --init, "
                                              "cpu, paper, smoke) or a JSON "
                                              "file (keys of TrainConfig; optional \"preset\" base).")] = "cpu-tum",
     out: Annotated[Path | None, typer.Option(help="Output folder (checkpoints, metrics.jsonl).")] = None,

@@ -156,6 +156,7 @@ def _from_dict(base: TrainConfig, data: dict) -> TrainConfig:
 
 def presets() -> dict[str, TrainConfig]:
     """`cpu-real`: real people at scale (issue 20; the recipe for the next checkpoint, 3 h on this CPU).
+    `cpu-real-tum-ft`: a `cpu-real` run fine-tuned with the TUM halfsphere frames (needs `init_weights`).
     `cpu-tum`: the recipe of the shipped checkpoint (adds teacher distillation on the TUM walking_halfsphere
     frames). `cpu-tum-ft`: a fine-tuning experiment on top of it (needs `init_weights`, a `cpu-tum` msnet.pt).
     `cpu`: the previous recipe (no TUM frames). `paper`: the paper's hyper-parameters (for a GPU).
@@ -180,8 +181,15 @@ def presets() -> dict[str, TrainConfig]:
                        extra_teachers=("{shared}/models/deeplabv3_mnv2_pascal_quant.tflite",),
                        p_distractor_paste=0.3, p_chair_paste=0.15, person_height=(0.3, 1.1),
                        cache_dir="/tmp/msnet_cache_real")
+    # Fine-tuning a `cpu-real` run (`--init` its msnet.pt) with the TUM walking_halfsphere frames distilled as in
+    # `cpu-tum`: the `cpu-real` run found no one on walking_xyz and few of the synthetic room's people
+    # (MODEL_CARD.md, 2026-12-03).
+    cpu_real_tum_ft = replace(cpu_real, time_budget_min=30.0, lr=5e-4, warmup_fraction=0.02, seed=1,
+                              target_frames=(halfsphere,), p_target=0.25, p_labelled=0.35, p_target_background=0.3,
+                              bn_extra_frames=(halfsphere,))
     return {
         "cpu-real": cpu_real,
+        "cpu-real-tum-ft": cpu_real_tum_ft,
         "cpu-tum": cpu_tum,
         "cpu-tum-ft": cpu_tum_ft,
         "cpu": cpu,
