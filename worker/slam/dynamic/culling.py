@@ -31,6 +31,7 @@ from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, m
 from worker.slam.features.depth import backproject
 from worker.slam.features.matching import hamming
 from worker.slam.features.search import KeypointIndex
+from worker.slam.geometry.pnp import sqpnp_ransac
 
 
 @dataclass(frozen=True)
@@ -206,12 +207,8 @@ def _relative_pose(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndar
         pose = _refine_from(X, uv, K, T_init, config)
         if pose is not None:
             return pose
-    try:
-        ok, rvec, tvec, inl = cv2.solvePnPRansac(X, uv, K, None, reprojectionError=config.pnp_px,
-                                                 iterationsCount=300, flags=cv2.SOLVEPNP_SQPNP)
-    except cv2.error:  # SQPnP asserts on a sample whose points (nearly) coincide: the depth test is skipped
-        return None
-    return (rvec, tvec) if ok and inl is not None and len(inl) >= 6 else None
+    got = sqpnp_ransac(X, uv, K, config.pnp_px, 300, 6)  # None: the depth test is skipped for this frame
+    return None if got is None else (got[0], got[1])
 
 
 def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""PnP-RANSAC from 3D map points to 2D keypoints (initialisation for relocalisation and loop closure)."""
+"""PnP-RANSAC from 3D points to 2D keypoints (relocalisation and loop closure; SQPnP for frame-to-frame poses)."""
 from __future__ import annotations
 
 import cv2
@@ -24,3 +24,18 @@ def pnp_ransac(X_w: np.ndarray, uv: np.ndarray, K: np.ndarray, reproj_px: float 
     T_WC[:3, :3] = R.T
     T_WC[:3, 3] = -R.T @ tvec.ravel()
     return T_WC, mask
+
+
+def sqpnp_ransac(X: np.ndarray, uv: np.ndarray, K: np.ndarray, reproj_px: float, iterations: int,
+                 min_inliers: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(rvec, tvec, inlier indices) of the camera seeing (N,3) points `X` at (N,2) float64 pixels `uv`, by
+    SQPnP-RANSAC (EPnP degenerates on planar scenes); None when it fails or keeps fewer than `min_inliers`.
+    SQPnP asserts on a sample whose points (nearly) coincide (seen on real frames): that is a failure too."""
+    try:
+        ok, rvec, tvec, inl = cv2.solvePnPRansac(X, uv, K, None, reprojectionError=reproj_px,
+                                                 iterationsCount=iterations, flags=cv2.SOLVEPNP_SQPNP)
+    except cv2.error:
+        return None
+    if not ok or inl is None or len(inl) < min_inliers:
+        return None
+    return rvec, tvec, inl.ravel()

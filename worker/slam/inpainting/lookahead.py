@@ -19,6 +19,7 @@ import numpy as np
 
 from worker.slam.config import valid
 from worker.slam.features.types import Features
+from worker.slam.geometry.pnp import sqpnp_ransac
 
 
 @dataclass(frozen=True)
@@ -77,16 +78,11 @@ def relative_pose_pnp(target: Features, target_static: np.ndarray, future: Featu
     z = target.depth[ti].astype(np.float64)
     pts = np.stack([(uv_t[ti, 0] - K[0, 2]) / K[0, 0] * z, (uv_t[ti, 1] - K[1, 2]) / K[1, 1] * z, z], 1)
     uv_f = future.uv_raw if future.uv_raw is not None else future.uv
-    try:
-        ok, rvec, tvec, inl = cv2.solvePnPRansac(pts, uv_f[fi].astype(np.float64), K, None,
-                                                 reprojectionError=config.reprojection_px, iterationsCount=200,
-                                                 flags=cv2.SOLVEPNP_SQPNP)  # EPnP degenerates on planar scenes
-        if not ok or inl is None or len(inl) < config.min_pnp_inliers:
-            return None
-        inl = inl.ravel()
-        rvec, tvec = cv2.solvePnPRefineLM(pts[inl], uv_f[fi][inl].astype(np.float64), K, None, rvec, tvec)
-    except cv2.error:  # SQPnP asserts on a sample whose points (nearly) coincide: no pose from this frame
+    got = sqpnp_ransac(pts, uv_f[fi].astype(np.float64), K, config.reprojection_px, 200, config.min_pnp_inliers)
+    if got is None:
         return None
+    rvec, tvec, inl = got
+    rvec, tvec = cv2.solvePnPRefineLM(pts[inl], uv_f[fi][inl].astype(np.float64), K, None, rvec, tvec)
     T = np.eye(4)
     T[:3, :3] = cv2.Rodrigues(rvec)[0]
     T[:3, 3] = tvec.ravel()
