@@ -81,6 +81,11 @@ class TrackingConfig:
     measurement")."""
     established_disagree_m: float = valid(0.01, 0.0, 10.0)
     """Translation between the plain and the weighted pose beyond which the weighted one is taken."""
+    rescue_with_held_back: bool = True
+    """A frame that cannot be tracked on the keypoints culling kept is tracked again with the ones it held back
+    added (segmentation marking most of the view leaves too few); of those, only the ones matched to map points
+    as inliers stay with the frame, so the map's established static points decide which marked parts are
+    static, and unmatched keypoints on people never become map points. Counted as `rescued_frames`."""
     local_map_keyframes: int = valid(12, 1, 1_000)
     """Covisible keyframes whose points form the local map."""
     keyframe_max_frames: int = valid(20, 1, 100_000)

@@ -49,6 +49,8 @@ class FrameInputs:
     """bool (H,W): pixels of potentially dynamic classes (segmentation)."""
     dynamic_mask: np.ndarray | None = None
     """bool (H,W): pixels judged moving (culling)."""
+    held_back: Features | None = None
+    """Keypoints culling removed from `features`: the tracker falls back on them only when it would be lost."""
     previews: dict[str, np.ndarray] | None = None
     """RGB uint8 images worth saving for this frame (e.g. {'rgb', 'mask', 'restored'})."""
     prepared: dict[str, object] = field(default_factory=dict)
@@ -64,7 +66,7 @@ class FrameInputs:
         """The part the tracker reads."""
         return TrackInputs(features=self.features, exclude_mask=self.exclude_mask,
                            extra_features=self.extra_features, restored_depth=self.restored_depth,
-                           restored_rgb=self.restored_rgb)
+                           restored_rgb=self.restored_rgb, held_back=self.held_back)
 
 
 @dataclass(frozen=True)

@@ -160,6 +160,7 @@ class CullingStage:
             inputs.dynamic_mask = inputs.potentially_dynamic
             removed = mask_at(inputs.exclude_mask, feats.uv)
         inputs.features = feats.select(~removed)
+        inputs.held_back = feats.select(removed) if removed.any() else None
         inputs.info.update(features_removed=int(removed.sum()), features_kept=int((~removed).sum()))
         self.removed_total += int(removed.sum())
         self.kept_total += int((~removed).sum())

@@ -24,3 +24,6 @@ class TrackInputs:
     dense map instead of the raw depth."""
     restored_rgb: np.ndarray | None = None
     """uint8 RGB (H,W,3): the frame's colour with dynamic regions filled; replaces the raw colour."""
+    held_back: Features | None = None
+    """Keypoints culling removed (raw image coordinates, measured depth), offered only when the frame would be
+    lost without them (`tracking.rescue_with_held_back`)."""

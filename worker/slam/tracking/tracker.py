@@ -55,6 +55,8 @@ class Tracker:
         self.lost_streak = 0
         #: Frames whose final pose solve took the established points' pose (`established_frames`).
         self.established_switches = 0
+        #: Frames tracked only with the keypoints culling held back (`rescue_with_held_back`).
+        self.rescued_frames = 0
         #: First keyframe id of every map not merged into an older one (maps after a loss continue the ids).
         self.map_starts = [0]
         #: The last successfully tracked frame's result (the pipeline hands its pose to the stages).
@@ -106,6 +108,9 @@ class Tracker:
         pred = self.motion.predict()
         assert pred is not None and self.ref_kf is not None, "the map's first keyframe set both"
         est, pids = self._track_local_map(feats, pred)
+        if est is None and self.tc.rescue_with_held_back and given.held_back is not None and len(given.held_back):
+            est, pids, feats = self._rescue(feats, given.held_back, pred)
+            self.rescued_frames += int(est is not None)
         relocalised = False
         if est is None:
             est, pids = self._relocalise(feats)
@@ -210,6 +215,20 @@ class Tracker:
             return True
         self.ref_kf, self.local_kfs, self.last_point_ids = saved
         return False
+
+    def _rescue(self, feats: Features, held_back: Features, pred: np.ndarray
+                ) -> tuple[PoseEstimate | None, np.ndarray, Features]:
+        """Track on `feats` plus the keypoints culling held back (see `rescue_with_held_back`); returns
+        (estimate or None, point ids, the frame's keypoints: `feats` and the held-back inliers)."""
+        if self.camera.has_distortion:
+            held_back = self._undistort(held_back)
+        both = Features.concat([feats, held_back])
+        est, pids = self._track_local_map(both, pred)
+        if est is None:
+            return None, pids[: len(feats)], feats
+        keep = np.ones(len(both), bool)
+        keep[len(feats):] = pids[len(feats):] >= 0
+        return est, pids[keep], both.select(keep)
 
     def _local_points(self) -> np.ndarray:
         kfs = self.map.keyframes
