@@ -14,8 +14,9 @@ and tracked. Results are the same either way. `timings_ms[stage]` stays the stag
 `metrics['overlapped_stages']` names the stages that ran ahead.
 
 Deferred work: a stage whose output tracking does not read may leave it in `FrameInputs.deferred` (restoration
-on demand); it runs after tracking only when the frame became a keyframe or a preview is due, and its time is
-added to the stage's own entry for that frame.
+on demand); it runs after tracking only when the frame became a keyframe or a preview is due, on a background
+thread behind the pipeline thread (`restore_behind`; its results are stored in frame order, the same as in
+line), and its time is added to the stage's own entry for that frame.
 """
 from __future__ import annotations
 
@@ -42,6 +43,7 @@ from worker.slam.io.prepare_ahead import PrepareAhead, Prepared
 from worker.slam.io.read_ahead import ReadAhead
 from worker.slam.io.sequence import Frame, Sequence
 from worker.slam.io.trajectory import Trajectory, write_tum_trajectory
+from worker.slam.io.work_behind import WorkBehind
 from worker.slam.map.map import Map
 from worker.slam.mapping.dense_map import build_dense_map
 from worker.slam.mapping.local_mapping import LocalMapper
@@ -99,12 +101,14 @@ class _Timer:
 def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str | None = None, *,
                  start: int = 0, max_frames: int | None = None, progress: ProgressFn | None = None,
                  should_cancel: CancelFn | None = None, stages: list[FrameStage] | None = None,
-                 read_ahead: int = 2, prepare_ahead: bool = True) -> RunResult:
+                 read_ahead: int = 2, prepare_ahead: bool = True, restore_behind: bool = True) -> RunResult:
     """Track frames [start, start+max_frames) of `sequence`; write the outputs to `out_dir` when given.
 
     `read_ahead`: frames decoded ahead on a background thread (0: read on this thread).
     `prepare_ahead`: with read-ahead, run the stages' `prepare(frame)` on another background thread as frames
     are decoded (False, or `read_ahead` 0: each stage computes it in `process` on this thread).
+    `restore_behind`: run deferred stage work (restoration of keyframes and previews) on a background thread
+    while the next frames are tracked (False: on this thread, right after the frame's tracking).
     """
     if start < 0 or start >= len(sequence):
         raise ConfigError(f"start {start} is outside the sequence (0..{len(sequence) - 1})")
@@ -133,7 +137,8 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     # frames after the first are decoded on a background thread while this one runs the stages; the reader
     # queues each decoded frame's `prepare` work on a second thread (left by `with` before the reader stops)
     with PrepareAhead(_preparers(stages) if prepare_ahead and read_ahead > 0 else {}) as prep, \
-            ReadAhead(lambda i: prep.submit(sequence[i]), range(start + 1, stop), read_ahead) as ahead:
+            ReadAhead(lambda i: prep.submit(sequence[i]), range(start + 1, stop), read_ahead) as ahead, \
+            WorkBehind(restore_behind) as behind:
         frames: Iterator[Prepared] = chain([prep.submit(first)], ahead)
         for k in range(total):
             if should_cancel is not None and should_cancel():
@@ -161,9 +166,6 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
             res = tracker.track(frame.index, frame.timestamp, frame.rgb, frame.depth, inputs.track_inputs())
             cpu_tracking.append(time.process_time() - c0)
             t = timer("tracking", t)
-            if inputs.deferred is not None and deferred_by is not None:
-                t = _run_deferred(inputs, res, previews.wants(frame.index), config.dense.stride,
-                                  timer.ms[deferred_by], t)
             for key, val in inputs.info.items():
                 if isinstance(val, (int, float)) and not isinstance(val, bool):
                     stage_info[key].append(float(val))
@@ -177,14 +179,19 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
                     t = timer("loop_closure", t)
                 tracker.on_map_updated(res)
             stamps[k], tracked[k] = frame.timestamp, res.ok
-            frame_info.append({"features": len(res.feats), "matched_points": int(np.sum(res.point_ids >= 0)),
-                               **{k2: v for k2, v in inputs.info.items() if isinstance(v, (int, float))}})
+            row = {"features": len(res.feats), "matched_points": int(np.sum(res.point_ids >= 0)),
+                   **{k2: v for k2, v in inputs.info.items() if isinstance(v, (int, float))}}
+            frame_info.append(row)
+            if inputs.deferred is not None and deferred_by is not None:
+                _defer(behind, inputs, res, previews, config.dense.stride, timer.ms[deferred_by], row, stage_info)
+            behind.collect()
             n_reloc += int(res.relocalised)
             n_new_maps += int(res.new_map)
             n_merges += int(res.merged)
             rel.append(_relative(smap, res))
             if progress is not None:
                 progress(k + 1, total, "tracking")
+        behind.finish()  # the keyframes' restored images and the previews, before the dense map
     loop_s = time.perf_counter() - t_loop
     if config.mapping.final_global_ba:
         t = time.perf_counter()
@@ -240,21 +247,38 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     return result
 
 
-def _run_deferred(inputs: FrameInputs, res: TrackResult, preview_due: bool, stride: int, stage_ms: list[float],
-                  t0: float) -> float:
-    """Run the work a stage deferred (restoration) when this frame became a keyframe or a preview is due; give a
-    keyframe the restored images the tracker would have stored had they been there when it tracked. Its time is
-    added to the stage's entry for this frame. Returns the time now."""
-    deferred, inputs.deferred = inputs.deferred, None  # dropped when unused (it holds the frame's images)
-    why = "keyframe" if res.keyframe is not None else "preview" if preview_due else None
+def _defer(behind: WorkBehind, inputs: FrameInputs, res: TrackResult, previews: _PreviewPicker, stride: int,
+           stage_ms: list[float], row: dict, stage_info: dict[str, list[float]]) -> None:
+    """Hand `behind` the work a stage deferred (restoration) when this frame became a keyframe or a preview is
+    due (dropped otherwise: it holds the frame's images). When it is done: the keyframe gets the restored images
+    the tracker would have stored had they been there when it tracked, the previews their slot (claimed now, in
+    frame order, as if they had been offered now), the frame's figures its `row` and `stage_info`, and its time
+    the stage's entry for this frame."""
+    deferred, inputs.deferred = inputs.deferred, None
+    why = "keyframe" if res.keyframe is not None else "preview" if previews.wants(res.index) else None
     if deferred is None or why is None:
-        return t0
-    deferred(inputs, why)
-    if res.keyframe is not None and inputs.restored_rgb is not None and inputs.restored_depth is not None:
-        res.keyframe.set_dense_images(inputs.restored_rgb, inputs.restored_depth, stride)
-    t1 = time.perf_counter()
-    stage_ms[-1] += (t1 - t0) * 1000
-    return t1
+        return
+    keep_previews = previews.claim(res.index)
+    out = FrameInputs(features=inputs.features)  # written by the background thread only
+    entry = len(stage_ms) - 1
+
+    def work() -> float:
+        t0 = time.perf_counter()
+        deferred(out, why)
+        return (time.perf_counter() - t0) * 1000
+
+    def done(ms: float) -> None:
+        stage_ms[entry] += ms
+        if res.keyframe is not None and out.restored_rgb is not None and out.restored_depth is not None:
+            res.keyframe.set_dense_images(out.restored_rgb, out.restored_depth, stride)
+        if keep_previews and out.previews:
+            previews.kept[res.index] = out.previews
+        for key, val in out.info.items():
+            if isinstance(val, (int, float)) and not isinstance(val, bool):
+                stage_info[key].append(float(val))
+                row[key] = val
+
+    behind.submit(work, done)
 
 
 def _preparers(stages: list[FrameStage]) -> dict[str, Callable[[Frame], object]]:
@@ -306,11 +330,15 @@ class _PreviewPicker:
         """Whether a frame with previews at `index` would be kept."""
         return any(w <= index for w in self.wanted)
 
-    def offer(self, index: int, images: dict[str, np.ndarray]) -> None:
-        # the first frame with previews at or after each wanted index
+    def claim(self, index: int) -> bool:
+        """Whether the previews of frame `index` are kept: the first frame with previews at or after each wanted
+        index (frames claim in order; the images may come later, into `kept`)."""
         due = [w for w in self.wanted if w <= index]
-        if due:
-            self.wanted -= set(due)
+        self.wanted -= set(due)
+        return bool(due)
+
+    def offer(self, index: int, images: dict[str, np.ndarray]) -> None:
+        if self.claim(index):
             self.kept[index] = images
 
 

@@ -1,4 +1,5 @@
-"""The pipelined worker gives the same outputs as the plain one: segmentation run ahead on its own thread."""
+"""The pipelined worker gives the same outputs as the plain one: segmentation and ORB extraction run ahead on a
+thread of their own, restoration of keyframes and previews behind on another."""
 from __future__ import annotations
 
 import json
@@ -30,7 +31,8 @@ def test_segmentation_ahead_gives_the_same_trajectory_and_map(people_seq, tmp_pa
     assert (overlapped / "trajectory.txt").read_bytes() == traj
     assert (overlapped / "map.ply").read_bytes() == (plain / "map.ply").read_bytes()
     m0, m1 = (json.loads((d / "metrics.json").read_text()) for d in (plain, overlapped))
-    assert m0["overlapped_stages"] == [] and m1["overlapped_stages"] == ["segmentation"]
+    # the network's mask and culling's ORB features, both from the frame alone
+    assert m0["overlapped_stages"] == [] and m1["overlapped_stages"] == ["culling", "segmentation"]
     # the stage's compute time is kept either way; the wait for the result ahead is reported apart from it
     assert m0["timings_ms"]["segmentation"] > 0 and m1["timings_ms"]["segmentation"] > 0
     assert "segmentation_wait" in m1["timings_ms"] and "segmentation_wait" not in m0["timings_ms"]
@@ -40,7 +42,8 @@ def test_segmentation_ahead_gives_the_same_trajectory_and_map(people_seq, tmp_pa
 def test_truth_masks_have_nothing_to_run_ahead(people_seq):
     cfg = get_preset("no-restoration", {"segmentation": {"source": "truth"}})
     res = run_pipeline(Sequence(people_seq, PRESETS["tum3"]), cfg, None, max_frames=5)
-    assert res.metrics["overlapped_stages"] == [] and res.metrics["stage_info"]["potentially_dynamic_fraction"] > 0
+    assert res.metrics["overlapped_stages"] == ["culling"]  # its ORB features still run ahead
+    assert res.metrics["stage_info"]["potentially_dynamic_fraction"] > 0
 
 
 def test_restoration_on_demand_gives_the_same_outputs_and_restores_fewer_frames(people_seq, tmp_path):
@@ -70,3 +73,21 @@ def test_restored_features_restore_every_frame(people_seq, tmp_path):
     m = res.metrics["restoration"]
     assert m["restored_frames"] > 0 and m["restored_for"] == {"tracking": m["restored_frames"]}
     assert m["not_restored"] == 0
+
+
+def test_restoration_behind_gives_the_same_outputs(people_seq, tmp_path):
+    """Deferred restorations (keyframes, previews) on the background thread store the same images, previews,
+    per-frame figures and metrics as run in line right after each frame's tracking."""
+    cfg = get_preset("full")
+    for behind in (False, True):
+        run_pipeline(Sequence(people_seq, PRESETS["tum3"]), cfg, tmp_path / str(behind), restore_behind=behind)
+    inline, behind_dir = tmp_path / "False", tmp_path / "True"
+    for name in ("trajectory.txt", "keyframes.txt", "map.ply", "frame_stats.csv"):
+        assert (behind_dir / name).read_bytes() == (inline / name).read_bytes(), name
+    previews = sorted(p.name for p in inline.glob("frame_*.jpg"))
+    assert previews and sorted(p.name for p in behind_dir.glob("frame_*.jpg")) == previews
+    for name in previews:
+        assert (behind_dir / name).read_bytes() == (inline / name).read_bytes(), name
+    m0, m1 = (json.loads((d / "metrics.json").read_text()) for d in (inline, behind_dir))
+    assert m1["restoration"] == m0["restoration"] and m1["stage_info"] == m0["stage_info"]
+    assert m0["restoration"]["restored_for"].get("keyframe", 0) > 0  # there was deferred work to move

@@ -17,6 +17,7 @@ from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig, valid
 from worker.slam.dynamic.culling import CullingConfig, CullingResult, cull_frame, dilate_disc, mask_at
 from worker.slam.errors import SequenceFormatError
+from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.types import Features
 from worker.slam.geometry.se3 import inv
 from worker.slam.io.sequence import Frame
@@ -100,6 +101,8 @@ class CullingStage:
         self.cfg: CullingStageConfig = config.section("culling")
         self.use_segmentation = "segmentation" in config.stages
         self.camera = camera
+        # its own extractor (the tracker's settings): `prepare` may run on another thread than the tracker's
+        self.extractor = OrbExtractor(config.features)
         self.history: deque[_PastFrame] = deque(maxlen=max(1, self.cfg.lag_frames))
         self.scores: TruthScores | None = None
         self.removed_total = self.kept_total = self.readmitted_total = 0
@@ -112,12 +115,18 @@ class CullingStage:
         # This frame's result, None when nothing was compared (bench/plot_culling.py).
         self.last: CullingResult | None = None
 
+    def prepare(self, frame: Frame) -> Features:
+        """The frame's ORB features, from the frame alone: the pipeline may extract them ahead on another thread
+        while the frame before is culled and tracked (the tracker uses them; it extracts nothing itself)."""
+        return self.extractor.extract(cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY), frame.depth)
+
     def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
         if self.scores is None and ctx.truth is not None:
             self.scores = TruthScores(ctx.truth)
         self.last = None
-        gray = cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY)
-        feats = ctx.extractor.extract(gray, frame.depth)
+        feats = inputs.prepared.get(self.name)
+        if not isinstance(feats, Features):
+            feats = self.prepare(frame)
         removed = np.zeros(len(feats), bool)
         last = ctx.last
         if self.history and last is not None and last.index == self.history[-1].index:

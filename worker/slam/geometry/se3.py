@@ -17,7 +17,9 @@ def exp_se3(xi: np.ndarray) -> np.ndarray:
     """(6,) twist (rho, phi) -> 4x4 transform."""
     rho, phi = xi[:3], xi[3:]
     theta = np.linalg.norm(phi)
-    W = hat(phi)
+    # `hat` of one vector, written out: the same matrix without `hat`'s batched stacking (motion-only BA
+    # calls this once per Gauss-Newton step, and the stacking was most of its cost)
+    W = np.array([[0.0, -phi[2], phi[1]], [phi[2], 0.0, -phi[0]], [-phi[1], phi[0], 0.0]])
     if theta < 1e-8:
         R = np.eye(3) + W
         V = np.eye(3) + 0.5 * W

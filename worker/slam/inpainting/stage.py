@@ -11,11 +11,15 @@ depth replace the raw frame for keypoint depth and the dense map, and ORB keypoi
 On demand (`on_demand`, the default): tracking reads restored pixels only through restored features (off by
 default) and through the depth looked up at keypoints whose few-pixel neighbourhood reaches into the hole. A
 frame with neither is not restored in `process`: its restoration is left in `FrameInputs.deferred`, which the
-pipeline runs only when the frame becomes a keyframe (the dense map) or a preview is due. Outputs are the
-same; the restoration metrics then cover the restored frames only (`restored_frames`, `restored_for`).
+pipeline runs only when the frame becomes a keyframe (the dense map) or a preview is due, on a background
+thread while the next frames are tracked. Outputs are the same; the restoration metrics then cover the restored
+frames only (`restored_frames`, `restored_for`). A restoration reads only what `process` captured for it (the
+frame, its hole, the past references as they were) and the stage's state that only restorations touch, under
+one lock, so one in `process` and one deferred never interleave.
 """
 from __future__ import annotations
 
+import threading
 from collections import Counter, deque
 from dataclasses import dataclass, field
 
@@ -24,6 +28,7 @@ import numpy as np
 
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig, valid
+from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.types import Features
 from worker.slam.inpainting.lookahead import LookaheadConfig, moving_pixels, relative_pose_pnp
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
@@ -94,6 +99,10 @@ class RestorationStage:
         self.deferred = 0
         self.extra = 0
         self.relaxed = 0
+        # restorations may run on the pipeline's background thread: they share `ahead`, the counters and an
+        # extractor of their own (not the tracker's)
+        self._lock = threading.Lock()
+        self.extractor = OrbExtractor(config.features)
 
     def _record_pose(self, ctx: StageContext) -> None:
         last = ctx.last
@@ -141,6 +150,11 @@ class RestorationStage:
 
     def _restore(self, frame: Frame, hole: np.ndarray, desc: np.ndarray | None, inputs: FrameInputs,
                  ctx: StageContext, past: list[_Past], why: str) -> None:
+        with self._lock:
+            self._restore_locked(frame, hole, desc, inputs, ctx, past, why)
+
+    def _restore_locked(self, frame: Frame, hole: np.ndarray, desc: np.ndarray | None, inputs: FrameInputs,
+                        ctx: StageContext, past: list[_Past], why: str) -> None:
         T_pred = ctx.T_WC_pred
         assert T_pred is not None
         both = self.cfg.references == "both-sided"
@@ -202,7 +216,7 @@ class RestorationStage:
             if j not in self.ahead:
                 f = seq[j]
                 gray = cv2.cvtColor(f.rgb, cv2.COLOR_RGB2GRAY)
-                self.ahead[j] = (f, ctx.extractor.extract(gray, f.depth))
+                self.ahead[j] = (f, self.extractor.extract(gray, f.depth))
             f, feats = self.ahead[j]
             est = relative_pose_pnp(own, ~hole, feats, self.camera.K, self.cfg.lookahead)
             if est is not None:
@@ -213,7 +227,7 @@ class RestorationStage:
                            ctx: StageContext) -> Features:
         region = cv2.dilate(hole.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
         gray = cv2.cvtColor(out.rgb, cv2.COLOR_RGB2GRAY)
-        feats = ctx.extractor.extract(gray, out.depth, ~region)
+        feats = self.extractor.extract(gray, out.depth, ~region)
         if not len(feats):
             return feats
         h, w = hole.shape
