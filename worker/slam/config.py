@@ -85,7 +85,8 @@ class TrackingConfig:
     """A frame that cannot be tracked on the keypoints culling kept is tracked again with the ones it held back
     added (segmentation marking most of the view leaves too few); of those, only the ones matched to map points
     as inliers stay with the frame, so the map's established static points decide which marked parts are
-    static, and unmatched keypoints on people never become map points. Counted as `rescued_frames`."""
+    static, and unmatched keypoints on people never become map points. A first frame whose kept keypoints
+    cannot start a map starts it on all of them (nothing to judge them by yet). Counted as `rescued_frames`."""
     local_map_keyframes: int = valid(12, 1, 1_000)
     """Covisible keyframes whose points form the local map."""
     keyframe_max_frames: int = valid(20, 1, 100_000)

@@ -102,17 +102,33 @@ def test_culling_gives_band_keypoints_back_rather_than_starve_the_tracker():
     assert np.array_equal(stage._readmit(removed, uv, dynamic, {}), removed)
 
 
-def test_masks_over_ninety_percent_of_the_view_do_not_starve_the_tracker(shared, tmp_path):
+@pytest.fixture(scope="module")
+def issue_seq(shared, tmp_path_factory):
+    """`vtdslam synth OUT --frames 60 --people 2 --seed 2` (walking_xyz's camera path, hence `shared`)."""
+    root = tmp_path_factory.mktemp("issue60")
+    generate_synthetic(root, SynthConfig(frames=60, people=2, seed=2, shared_dir=shared))
+    return root
+
+
+@pytest.mark.parametrize("preset", ["orb-only", "geometry-only", "no-restoration", "full"])
+def test_the_sixty_frame_sequence_tracks_in_every_preset(issue_seq, preset, tmp_path):
+    """The shipped MSNET marks 94-96 % of its first frames (cartoon people and textures it never saw): the first
+    map starts on every keypoint and held-back keypoints rescue the starved frames (3 frames were lost)."""
+    m = run_pipeline(Sequence(issue_seq), get_preset(preset), tmp_path).metrics
+    assert m["tracked"] == 60 and m["ate"]["rmse"] < 0.04
+
+
+def test_masks_over_ninety_percent_of_the_view_do_not_starve_the_tracker(issue_seq, tmp_path):
     """The issue's 60-frame sequence (`vtdslam synth --frames 60 --people 2 --seed 2`: walking_xyz's camera path,
-    hence `shared`); from frame 10 on, segmentation marks 90 % of every view (all but the left tenth) besides
-    the people. Culling then leaves the tracker too few keypoints in some frames, and the ones it held back,
-    matched to the map's points, carry tracking through (`tracking.rescue_with_held_back`); without them a third
-    of the frames is lost."""
+    hence `shared`); segmentation marks 90 % of every view (all but the left tenth) besides the people, from
+    the first frame on. The first map starts on every keypoint (too few are left outside the marks), culling
+    then leaves the tracker too few keypoints in some frames, and the ones it held back, matched to the map's
+    points, carry tracking through (`tracking.rescue_with_held_back`); without them half the frames are lost."""
     import cv2
 
     covered = tmp_path / "covered"
-    generate_synthetic(covered, SynthConfig(frames=60, people=2, seed=2, shared_dir=shared))
-    masks = sorted((covered / "truth" / "masks").glob("*.png"))[10:]
+    shutil.copytree(issue_seq, covered)
+    masks = sorted((covered / "truth" / "masks").glob("*.png"))
     for path in masks:
         mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         static = mask == 0
@@ -128,6 +144,6 @@ def test_masks_over_ninety_percent_of_the_view_do_not_starve_the_tracker(shared,
 
     rescued = metrics(True)
     assert rescued["tracked"] == 60 and rescued["rescued_frames"] > 0
-    assert rescued["ate"]["rmse"] < 0.03  # 0.0126 m when written (0.0138 m, 20 frames lost, without the rescue)
+    assert rescued["ate"]["rmse"] < 0.03  # 0.0135 m when written (0.0235 m, 30 frames lost, without the rescue)
     starved = metrics(False)
-    assert starved["tracked"] <= 50 and starved["rescued_frames"] == 0
+    assert starved["tracked"] <= 45 and starved["rescued_frames"] == 0

@@ -103,7 +103,7 @@ class Tracker:
             dense_depth = np.where(exclude_mask, 0.0, depth).astype(np.float32)
 
         if len(self.map) == 0:
-            return self._initialise(index, timestamp, feats, rgb, dense_depth, depth)
+            return self._initialise(index, timestamp, feats, rgb, dense_depth, depth, given.held_back)
 
         pred = self.motion.predict()
         assert pred is not None and self.ref_kf is not None, "the map's first keyframe set both"
@@ -151,8 +151,16 @@ class Tracker:
     # ---- steps -------------------------------------------------------------------------------------------
 
     def _initialise(self, index: int, timestamp: float, feats: Features, rgb: np.ndarray,
-                    dense_depth: np.ndarray, measured: np.ndarray) -> TrackResult:
+                    dense_depth: np.ndarray, measured: np.ndarray, held_back: Features | None) -> TrackResult:
         T = np.eye(4)
+        if not can_start_map(self._n_new_points(feats), self.tc) and self.tc.rescue_with_held_back \
+                and held_back is not None and len(held_back):
+            # segmentation marks most of the first view: start on every keypoint (nothing to judge them by yet;
+            # culling against this frame and the established points' weighting sort them out afterwards)
+            both = Features.concat([feats, self._undistort(held_back) if self.camera.has_distortion else held_back])
+            if can_start_map(self._n_new_points(both), self.tc):
+                feats = both
+                self.rescued_frames += 1
         res = TrackResult(index, timestamp, T, False, False, feats, np.full(len(feats), -1, np.int64), None, 0)
         if not can_start_map(self._n_new_points(feats), self.tc):
             return res  # wait for a frame with enough depth
