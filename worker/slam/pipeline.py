@@ -166,9 +166,8 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
             res = tracker.track(frame.index, frame.timestamp, frame.rgb, frame.depth, inputs.track_inputs())
             cpu_tracking.append(time.process_time() - c0)
             t = timer("tracking", t)
-            for key, val in inputs.info.items():
-                if isinstance(val, (int, float)) and not isinstance(val, bool):
-                    stage_info[key].append(float(val))
+            for key, val in _numbers(inputs.info).items():
+                stage_info[key].append(val)
             if inputs.previews:
                 previews.offer(frame.index, inputs.previews)
             if res.keyframe is not None:
@@ -273,12 +272,16 @@ def _defer(behind: WorkBehind, inputs: FrameInputs, res: TrackResult, previews: 
             res.keyframe.set_dense_images(out.restored_rgb, out.restored_depth, stride)
         if keep_previews and out.previews:
             previews.kept[res.index] = out.previews
-        for key, val in out.info.items():
-            if isinstance(val, (int, float)) and not isinstance(val, bool):
-                stage_info[key].append(float(val))
-                row[key] = val
+        for key, val in _numbers(out.info).items():
+            stage_info[key].append(val)
+            row[key] = out.info[key]
 
     behind.submit(work, done)
+
+
+def _numbers(info: dict) -> dict[str, float]:
+    """The numeric entries of a frame's `info` (flags left out), as floats."""
+    return {k: float(v) for k, v in info.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
 
 
 def _preparers(stages: list[FrameStage]) -> dict[str, Callable[[Frame], object]]:

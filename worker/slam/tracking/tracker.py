@@ -96,8 +96,7 @@ class Tracker:
             extra.depth[missing] = lookup_depth(extra.uv[missing], used_depth, self.cfg.features.min_depth_m,
                                                 self.cfg.features.max_depth_m)
             feats = Features.concat([feats, extra])
-        if self.camera.has_distortion and len(feats):
-            feats = self._undistort(feats)
+        feats = self._undistorted(feats)
         dense_depth = used_depth
         if exclude_mask is not None and restored_depth is None:
             dense_depth = np.where(exclude_mask, 0.0, depth).astype(np.float32)
@@ -142,8 +141,11 @@ class Tracker:
         self.last_result = res
         return res
 
-    def _undistort(self, feats: Features) -> Features:
-        """Keypoints to ideal pinhole pixels (ORB-SLAM2 undistorts keypoints, not images)."""
+    def _undistorted(self, feats: Features) -> Features:
+        """Keypoints to ideal pinhole pixels (ORB-SLAM2 undistorts keypoints, not images); as they are when the
+        camera has no distortion."""
+        if not self.camera.has_distortion or not len(feats):
+            return feats
         und = cv2.undistortPoints(feats.uv.reshape(-1, 1, 2), self.K, np.asarray(self.camera.dist), P=self.K)
         return Features(und.reshape(-1, 2).astype(np.float64), feats.octave, feats.response, feats.desc,
                         feats.depth, uv_raw=feats.uv)
@@ -157,7 +159,7 @@ class Tracker:
                 and held_back is not None and len(held_back):
             # segmentation marks most of the first view: start on every keypoint (nothing to judge them by yet;
             # culling against this frame and the established points' weighting sort them out afterwards)
-            both = Features.concat([feats, self._undistort(held_back) if self.camera.has_distortion else held_back])
+            both = Features.concat([feats, self._undistorted(held_back)])
             if can_start_map(self._n_new_points(both), self.tc):
                 feats = both
                 self.rescued_frames += 1
@@ -228,9 +230,7 @@ class Tracker:
                 ) -> tuple[PoseEstimate | None, np.ndarray, Features]:
         """Track on `feats` plus the keypoints culling held back (see `rescue_with_held_back`); returns
         (estimate or None, point ids, the frame's keypoints: `feats` and the held-back inliers)."""
-        if self.camera.has_distortion:
-            held_back = self._undistort(held_back)
-        both = Features.concat([feats, held_back])
+        both = Features.concat([feats, self._undistorted(held_back)])
         est, pids = self._track_local_map(both, pred)
         if est is None:
             return None, pids[: len(feats)], feats
