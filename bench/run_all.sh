@@ -31,6 +31,21 @@ for seed in 1 2 3 4; do
 done
 $PY bench/bench_dynamic.py "${SEEDS[@]}" --presets orb-only,no-restoration --max-frames 300 --summary --references
 $PY bench/bench_dynamic.py "${SEEDS[@]}" --presets no-restoration --max-frames 300 --summary --config "$ORACLE15"
+echo "## all eight seeds (0-7): MSNET with the references, and the true-mask oracle (no band change)"
+SEEDS8=("${SEEDS[@]}")
+for seed in 5 6 7; do
+    .venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
+        "$BENCH_DIR/aug_s$seed" --frames 300 --seed "$seed" > /dev/null
+    SEEDS8+=(--sequence "$BENCH_DIR/aug_s$seed:7scenes")
+done
+$PY bench/bench_dynamic.py "${SEEDS8[@]}" --presets no-restoration --max-frames 300 --summary --references
+$PY bench/bench_dynamic.py "${SEEDS8[@]}" --presets no-restoration --max-frames 300 --summary \
+    --config '{"segmentation": {"source": "truth"}}'
+echo "## bonn_crowd_dev (evaluation only): every preset, and the DeepLabV3 teacher as segmenter"
+$PY bench/bench_dynamic.py --sequence "$SHARED/data/bonn_crowd_dev:bonn" \
+    --presets orb-only,geometry-only,no-restoration,full --teacher "$SHARED/models/deeplabv3_257_mv_gpu.tflite"
+echo "## real time: every preset, whole sequences, ORB-SLAM3 beside when pyorbslam3 is installed"
+$PY bench/bench_realtime.py --presets orb-only,geometry-only,no-restoration,full
 echo "## the synthetic room without people, and with the people's pixels cut out (--references)"
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth:tum3" --presets no-restoration --max-frames 300 --references
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth0:tum3" --presets orb-only,no-restoration --max-frames 300
