@@ -186,7 +186,7 @@ class RestorationStage:
         inputs.info.update(references=len(refs),
                            hole_seen_fraction=float(out.seen_by_reference.sum() / max(hole.sum(), 1)))
         if self.cfg.restored_features:
-            extra = self._restored_features(out, hole, inputs.features, ctx)
+            extra = self._restored_features(out, hole, inputs.features)
             inputs.extra_features = extra
             self.extra += len(extra)
             inputs.info["restored_features"] = len(extra)
@@ -223,8 +223,7 @@ class RestorationStage:
                 out[j] = (f, T_pred @ np.linalg.inv(est[0]))
         return out
 
-    def _restored_features(self, out: Restoration, hole: np.ndarray, own: Features | None,
-                           ctx: StageContext) -> Features:
+    def _restored_features(self, out: Restoration, hole: np.ndarray, own: Features | None) -> Features:
         region = cv2.dilate(hole.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
         gray = cv2.cvtColor(out.rgb, cv2.COLOR_RGB2GRAY)
         feats = self.extractor.extract(gray, out.depth, ~region)

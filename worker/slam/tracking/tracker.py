@@ -159,7 +159,7 @@ class Tracker:
                 and held_back is not None and len(held_back):
             # segmentation marks most of the first view: start on every keypoint (nothing to judge them by yet;
             # culling against this frame and the established points' weighting sort them out afterwards)
-            both = Features.concat([feats, self._undistorted(held_back)])
+            both = self._with_held_back(feats, held_back)
             if can_start_map(self._n_new_points(both), self.tc):
                 feats = both
                 self.rescued_frames += 1
@@ -230,13 +230,17 @@ class Tracker:
                 ) -> tuple[PoseEstimate | None, np.ndarray, Features]:
         """Track on `feats` plus the keypoints culling held back (see `rescue_with_held_back`); returns
         (estimate or None, point ids, the frame's keypoints: `feats` and the held-back inliers)."""
-        both = Features.concat([feats, self._undistorted(held_back)])
+        both = self._with_held_back(feats, held_back)
         est, pids = self._track_local_map(both, pred)
-        if est is None:
+        if est is None:  # lost or relocalised on the kept keypoints alone, as without the rescue
             return None, pids[: len(feats)], feats
         keep = np.ones(len(both), bool)
         keep[len(feats):] = pids[len(feats):] >= 0
         return est, pids[keep], both.select(keep)
+
+    def _with_held_back(self, feats: Features, held_back: Features) -> Features:
+        """The frame's (undistorted) keypoints followed by the held-back ones, undistorted the same way."""
+        return Features.concat([feats, self._undistorted(held_back)])
 
     def _local_points(self) -> np.ndarray:
         kfs = self.map.keyframes
