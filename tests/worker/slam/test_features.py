@@ -8,8 +8,9 @@ import pytest
 from tests.worker.slam.synthetic_room import K_SYN, pose, render
 from worker.slam.config import FeatureConfig
 from worker.slam.features.depth import backproject, lookup_depth
-from worker.slam.features.matching import hamming, match_ratio
+from worker.slam.features.matching import cross_checked, hamming, match_ratio
 from worker.slam.features.orb import OrbExtractor
+from worker.slam.features.search import KeypointIndex, match_near_predictions
 from worker.slam.features.types import Features
 
 
@@ -76,6 +77,84 @@ def test_hamming_and_ratio_matching():
     assert (hamming(a, flipped) == 3).all()
     q, t = match_ratio(flipped[::-1], a)
     assert len(q) == 50 and np.array_equal(t, 49 - q)
+
+
+def _opencv_cross_checked(a: np.ndarray, b: np.ndarray, max_distance: int) -> tuple[np.ndarray, np.ndarray]:
+    ms = [m for m in cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True).match(a, b) if m.distance <= max_distance]
+    return np.array([m.queryIdx for m in ms], int), np.array([m.trainIdx for m in ms], int)
+
+
+@pytest.mark.parametrize("n,m,bits", [(300, 200, 32), (37, 400, 32), (120, 90, 20), (150, 100, 1), (1, 1, 32)])
+def test_cross_checked_equals_opencv(n, m, bits):
+    """The numba matcher gives OpenCV's cross-checked matches, ties included: half of b are noisy copies of a,
+    the rest random; short descriptors (`bits` bytes, padded to words; one byte: ties everywhere)."""
+    rng = np.random.default_rng(n + m)
+    a = rng.integers(0, 256, (n, bits), dtype=np.uint8)
+    b = rng.integers(0, 256, (m, bits), dtype=np.uint8)
+    k = min(n, m) // 2
+    b[:k] = a[:k] ^ (rng.random((k, bits)) < 0.04).astype(np.uint8)
+    for max_distance in (0, 30, 256):
+        got, want = cross_checked(a, b, max_distance), _opencv_cross_checked(a, b, max_distance)
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    assert all(len(x) == 0 for x in cross_checked(a[:0], b, 50))
+
+
+def test_cross_checked_on_real_orb(view):
+    """Real ORB descriptors of two views of the synthetic room: the same matches as OpenCV."""
+    ext = OrbExtractor(FeatureConfig())
+    f0 = ext.extract(*view)
+    rgb1, depth1 = render(pose([0.05, 0, 0], 13, -15))
+    f1 = ext.extract(cv2.cvtColor(rgb1, cv2.COLOR_RGB2GRAY), depth1)
+    got, want = cross_checked(f0.desc, f1.desc, 50), _opencv_cross_checked(f0.desc, f1.desc, 50)
+    assert len(got[0]) > 100 and np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
+def _reference_near_predictions(feats, uv_pred, desc, radius, max_hamming, ratio, level, taken):
+    """The search written plainly: every keypoint within the radius among the K nearest, then the rules."""
+    from scipy.spatial import cKDTree
+    k = min(8, len(feats))
+    d, cand = cKDTree(feats.uv).query(uv_pred, k=k, distance_upper_bound=float(radius.max()))
+    d, cand = d.reshape(len(uv_pred), k), cand.reshape(len(uv_pred), k)
+    best = {}
+    for p in range(len(uv_pred)):
+        dist = []
+        for j in range(k):
+            c = cand[p, j]
+            if c >= len(feats) or d[p, j] > radius[p] or taken[c] or abs(feats.octave[c] - level[p]) > 1:
+                continue
+            dist.append((int(hamming(desc[p], feats.desc[c])), c))
+        if not dist:
+            continue
+        values = sorted(v for v, _ in dist)
+        first = min(dist, key=lambda x: x[0])  # the first of equal distances
+        second = values[1] if len(values) > 1 else 10_000
+        if first[0] > max_hamming or not (second >= 10_000 or first[0] < ratio * second):
+            continue
+        c = first[1]
+        if c not in best or first[0] < best[c][0]:
+            best[c] = (first[0], p)
+    ki = np.array(sorted(best), int)
+    return np.array([best[c][1] for c in ki], int), ki
+
+
+def test_match_near_predictions_follows_its_rules():
+    """Ratio test against the second candidate (a tie at the least fails), radius, octave and `taken`
+    filters, one prediction per keypoint (the closest, the first of equals): the compiled search against a
+    plain one on random keypoints with descriptors drawn from a few shared bases (many near-ties)."""
+    rng = np.random.default_rng(3)
+    n, p = 400, 300
+    base = rng.integers(0, 256, (12, 32), dtype=np.uint8)
+    desc_kp = base[rng.integers(0, 12, n)] ^ (rng.random((n, 32)) < 0.05).astype(np.uint8)
+    feats = Features(rng.uniform(0, 200, (n, 2)), rng.integers(0, 4, n), np.ones(n, np.float32), desc_kp,
+                     np.ones(n, np.float32))
+    pick = rng.integers(0, n, p)
+    uv_pred = feats.uv[pick] + rng.normal(0, 4, (p, 2))
+    desc = desc_kp[pick] ^ (rng.random((p, 32)) < 0.05).astype(np.uint8)
+    radius = rng.uniform(3, 12, p)
+    level, taken = rng.integers(0, 4, p), rng.random(n) < 0.1
+    got = match_near_predictions(KeypointIndex(feats), uv_pred, desc, radius, 60, 0.9, level, taken)
+    want = _reference_near_predictions(feats, uv_pred, desc, radius, 60, 0.9, level, taken)
+    assert len(got[0]) > 50 and np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 
 
 def test_features_concat_select():

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from worker.slam.features.matching import cross_checked
 from worker.slam.features.search import KeypointIndex, match_near_predictions
 
 
@@ -25,11 +26,9 @@ class Matches:
 
 def match_orb(desc_prev: np.ndarray, desc_cur: np.ndarray, max_distance: int = 50) -> Matches:
     """Cross-checked Hamming matches of ORB descriptors (N, 32) uint8."""
-    if desc_prev is None or desc_cur is None or len(desc_prev) == 0 or len(desc_cur) == 0:
+    if desc_prev is None or desc_cur is None:
         return Matches(np.zeros(0, int), np.zeros(0, int))
-    ms = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True).match(desc_prev, desc_cur)
-    ms = [m for m in ms if m.distance <= max_distance]
-    return Matches(np.array([m.queryIdx for m in ms], int), np.array([m.trainIdx for m in ms], int))
+    return Matches(*cross_checked(desc_prev, desc_cur, max_distance))
 
 
 def predict_positions(uv_prev: np.ndarray, z_prev: np.ndarray, T_cur_prev: np.ndarray,

@@ -43,10 +43,13 @@ def split_segments(mask: np.ndarray, depth: np.ndarray, min_area: int = 200,
 
 def _split(m: np.ndarray, depth: np.ndarray, min_area: int, rel_jump: float) -> np.ndarray:
     inner = m & ~depth_edges(depth, rel_jump)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(inner.view(np.uint8), connectivity=4)
+    # OpenCV's components without its statistics and the areas counted here: two thirds of the time of
+    # `connectedComponentsWithStats` on VGA frames
+    n, labels = cv2.connectedComponents(inner.view(np.uint8), connectivity=4)
+    area = np.bincount(labels.ravel(), minlength=n)
     # uint16 labels (VGA: at most H*W/min_area = 1536 segments): OpenCV dilates them directly, no float copies
     keep = np.zeros(n, np.uint16 if n <= np.iinfo(np.uint16).max else np.float32)
-    big = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= min_area) + 1
+    big = np.flatnonzero(area[1:] >= min_area) + 1
     keep[big] = np.arange(1, len(big) + 1)
     grown = np.take(keep, labels)  # = keep[labels]; numpy's fancy indexing by a 2-D array is slower
     # Give the cut-out edge pixels (and small fragments) of the mask to the nearest kept segment.

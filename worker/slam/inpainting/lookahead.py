@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from worker.slam.config import valid
+from worker.slam.features.matching import cross_checked
 from worker.slam.features.types import Features
 from worker.slam.geometry.pnp import sqpnp_ransac
 
@@ -69,12 +70,10 @@ def relative_pose_pnp(target: Features, target_static: np.ndarray, future: Featu
         return None
     if len(use) > config.max_descriptors:
         use = use[np.linspace(0, len(use) - 1, config.max_descriptors).astype(int)]
-    matches = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True).match(target.desc[use], future.desc)
-    matches = [m for m in matches if m.distance < 64]
-    if len(matches) < config.min_pnp_inliers:
+    qi, fi = cross_checked(target.desc[use], future.desc, 63)
+    if len(qi) < config.min_pnp_inliers:
         return None
-    ti = use[[m.queryIdx for m in matches]]
-    fi = np.array([m.trainIdx for m in matches])
+    ti = use[qi]
     z = target.depth[ti].astype(np.float64)
     pts = np.stack([(uv_t[ti, 0] - K[0, 2]) / K[0, 0] * z, (uv_t[ti, 1] - K[1, 2]) / K[1, 1] * z, z], 1)
     uv_f = future.uv_raw if future.uv_raw is not None else future.uv

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from worker.slam.config import valid
+from worker.slam.features.matching import cross_checked
 
 
 @dataclass(frozen=True)
@@ -70,9 +70,7 @@ def match_ratio(desc_target: np.ndarray | None, desc_cand: np.ndarray | None,
         return 0.0
     if max_target is not None and len(desc_target) > max_target:
         desc_target = desc_target[np.linspace(0, len(desc_target) - 1, max_target).astype(int)]
-    matches = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True).match(desc_target, desc_cand)
-    good = sum(1 for m in matches if m.distance < 64)
-    return good / len(desc_target)
+    return len(cross_checked(desc_target, desc_cand, 63)[0]) / len(desc_target)
 
 
 def select_references(target: Candidate, candidates: list[Candidate],
