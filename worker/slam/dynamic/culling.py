@@ -27,6 +27,7 @@ from worker.slam.dynamic.epipolar import (
 )
 from worker.slam.dynamic.object_motion import ObjectMotionConfig, estimate_object_motion
 from worker.slam.dynamic.segments import grow_by_depth, split_segments
+from worker.slam.dynamic.sorted_stats import median_of_sorted, quantile_of_sorted
 from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy, object_threshold
 from worker.slam.features.depth import backproject
 from worker.slam.features.matching import hamming
@@ -384,11 +385,15 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     object_level = config.threshold.mode == "object" and prev_depth is not None and K is not None
     z_prev = prev_depth[_pixel(p_prev[:, 1], prev_depth.shape[0]), _pixel(p_prev[:, 0], prev_depth.shape[1])] \
         if object_level and prev_depth is not None else None
+    # each segment's scores, ascending: one sort for all segments instead of a mask and a quantile per segment
+    order = np.lexsort((scores, point_label))
+    sorted_scores = scores[order]
+    starts = np.concatenate([[0], np.cumsum(np.bincount(point_label, minlength=n_labels + 1))])
     for lab in range(1, n_labels + 1):
-        on = point_label == lab
-        s = scores[on]
+        s = sorted_scores[starts[lab]:starts[lab + 1]]
         by_object = False
         if z_prev is not None and K is not None:
+            on = point_label == lab
             sel = on & (z_prev > 0)
             motion = estimate_object_motion(backproject(p_prev[sel], z_prev[sel], K), p_cur[sel], K, T_cur_prev,
                                             config.object_motion)
@@ -398,8 +403,8 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
         if len(s) < config.min_points:
             moving = config.undecided_dynamic
         else:
-            moving = float(np.quantile(s, config.segment_quantile)) > thr_label[lab]
-        decisions.append(SegmentDecision(lab, "semantic", len(s), float(np.median(s)) if len(s) else 0.0, moving,
+            moving = quantile_of_sorted(s, config.segment_quantile) > thr_label[lab]
+        decisions.append(SegmentDecision(lab, "semantic", len(s), median_of_sorted(s) if len(s) else 0.0, moving,
                                          float(thr_label[lab]), by_object))
         moving_label[lab] = moving
     if config.grow_px > 0 and moving_label.any():
