@@ -12,7 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from worker.slam.segmentation.base import SegmentationError, SegmentationResult, SegmenterConfig, check_rgb
+from worker.slam.segmentation.base import SegmentationError, SegmentationResult, SegmenterConfig, check_rgb, labels_of
 
 VOC_CLASSES = 21
 # Our class -> PASCAL VOC index. Everything else in VOC counts as background.
@@ -88,4 +88,4 @@ class TfliteSegmenter:
         """rgb: (H, W, 3) uint8 RGB -> labels and probabilities at (H, W)."""
         check_rgb(rgb)
         probs = cv2.resize(self.predict_probs(rgb), (rgb.shape[1], rgb.shape[0]), interpolation=cv2.INTER_LINEAR)
-        return SegmentationResult(probs.argmax(-1).astype(np.uint8), self.classes, self.dynamic_classes, probs)
+        return SegmentationResult(labels_of(probs), self.classes, self.dynamic_classes, probs)

@@ -9,6 +9,7 @@ import pytest
 from tests.worker.slam.segmentation.test_msnet_model import TINY
 from worker.slam.errors import ConfigError
 from worker.slam.segmentation import SegmentationError, Segmenter, SegmenterConfig, available_backends, make_segmenter
+from worker.slam.segmentation.base import SegmentationResult, labels_of
 from worker.slam.segmentation.msnet import build_msnet
 from worker.slam.segmentation.msnet.checkpoint import default_checkpoint, load_model, save_model
 
@@ -74,3 +75,16 @@ def test_tflite_teacher_backend(shared: Path) -> None:
     seg = make_segmenter(SegmenterConfig(backend="tflite-teacher", model_path=str(model)))
     res = seg.segment(np.zeros((48, 64, 3), np.uint8))
     assert res.classes == ("background", "person") and res.labels.shape == (48, 64)
+
+
+def test_labels_of_is_numpys_argmax_and_dynamic_mask_its_classes():
+    """Ties go to the first class, a NaN wins as in numpy; the dynamic mask marks exactly its classes."""
+    rng = np.random.default_rng(0)
+    probs = rng.random((40, 50, 3)).astype(np.float32)
+    probs[:5] = probs[:5, :, :1]  # three equal scores: class 0
+    probs[5:10, :, 1:] = probs[5:10, :, 1:2]  # classes 1 and 2 tie above 0 sometimes: class 1
+    probs[10, 3, 2] = probs[11, 4, 0] = np.nan
+    got = labels_of(probs)
+    assert got.dtype == np.uint8 and np.array_equal(got, probs.argmax(-1))
+    res = SegmentationResult(got, ("background", "person", "chair"), ("chair",))
+    assert np.array_equal(res.dynamic_mask(), got == 2)

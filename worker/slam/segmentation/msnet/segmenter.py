@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import torch
 
-from worker.slam.segmentation.base import SegmentationResult, SegmenterConfig, check_rgb
+from worker.slam.segmentation.base import SegmentationResult, SegmenterConfig, check_rgb, labels_of
 from worker.slam.segmentation.guided import guided_upsample
 from worker.slam.segmentation.msnet.checkpoint import load_model
 from worker.slam.segmentation.msnet.model import MSNet
@@ -67,5 +67,5 @@ class MsnetSegmenter:
             probs = cv2.resize(small, (rgb.shape[1], rgb.shape[0]), interpolation=cv2.INTER_LINEAR)
             if probs.ndim == 2:  # OpenCV drops a singleton channel axis (a background-only model)
                 probs = probs[..., None]
-        labels = probs.argmax(-1).astype(np.uint8)
+        labels = labels_of(probs)
         return SegmentationResult(labels, self.classes, self.dynamic_classes, probs if self.with_probs else None)
