@@ -1,13 +1,17 @@
 """Culling cost per frame on real images: `cull_frame` alone, guided vs brute-force matching.
 
     .venv/bin/python bench/bench_culling.py SEQ_DIR [--camera 7scenes] [--frames 60] [--lag 10]
+    .venv/bin/python bench/bench_culling.py SEQ_DIR --camera bonn --pipeline no-restoration
 
 SEQ_DIR is a sequence with truth (`vtdslam augment` / `vtdslam synth` output): its truth masks stand in for the
 segmentation and its ground-truth poses, perturbed by 5 mm and 0.3° like a motion-model prediction, give the
 predicted relative pose, so the figures isolate culling from the network and the tracker. ORB extraction is
 not included (tracking needs it anyway). Wall time (run it on a quiet machine) and the calling thread's CPU
 time; not the process's CPU time, which OpenCV's spinning worker threads inflate on an idle core.
-Benchmarks print figures; they assert nothing.
+
+`--pipeline PRESET` times `cull_frame` inside a whole run of that preset instead (any sequence, e.g. the real
+../shared/data/bonn_crowd_dev): the preset's segmenter and the tracker's own predictions, every stage on one
+thread (no read-ahead) so nothing else runs while it is timed. Benchmarks print figures; they assert nothing.
 """
 from __future__ import annotations
 
@@ -26,9 +30,13 @@ sys.path.insert(0, str(ROOT))
 from worker.slam.camera import parse_camera  # noqa: E402
 from worker.slam.config import PipelineConfig  # noqa: E402
 from worker.slam.dynamic.culling import CullingConfig, cull_frame  # noqa: E402
+from worker.slam.dynamic.stage import CullingStage  # noqa: E402
 from worker.slam.features.orb import OrbExtractor  # noqa: E402
 from worker.slam.geometry.se3 import inv  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
+from worker.slam.pipeline import run_pipeline  # noqa: E402
+from worker.slam.presets import get_preset  # noqa: E402
+from worker.slam.stages import build_stages  # noqa: E402
 from worker.slam.truth import load_truth  # noqa: E402
 
 
@@ -38,7 +46,11 @@ def main() -> None:
     ap.add_argument("--camera", default="7scenes")
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--lag", type=int, default=10)
+    ap.add_argument("--pipeline", metavar="PRESET", help="time culling inside a run of this pipeline preset")
     args = ap.parse_args()
+    if args.pipeline:
+        _in_pipeline(args.sequence, args.camera, args.pipeline)
+        return
     seq, truth = Sequence(args.sequence, parse_camera(args.camera)), load_truth(args.sequence)
     if truth is None:
         ap.error(f"{args.sequence} has no truth (make one with `vtdslam augment` or `vtdslam synth`)")
@@ -70,6 +82,21 @@ def main() -> None:
             guided += res.guided
         print(f"| {label} | {len(ts)} | {np.median(n):.0f} | {guided} | {np.median(ts):.1f} | "
               f"{np.percentile(ts, 90):.1f} | {np.median(cpu):.1f} |", flush=True)
+
+
+def _in_pipeline(root: Path, camera: str, preset: str) -> None:
+    """`cull_frame`'s wall time per frame in a run of `preset` on `root`, all stages on this thread."""
+    seq, config = Sequence(root, parse_camera(camera)), get_preset(preset)
+    stages = build_stages(config, seq.camera)
+    res = run_pipeline(seq, config, None, stages=stages, read_ahead=0)
+    culling = next(s for s in stages if isinstance(s, CullingStage))
+    ms = np.array(culling.decision_ms)
+    print(f"| {root.name}, `{preset}`, one thread | frames culled | guided | cull_frame ms median | p90 | mean | "
+          "ATE rmse (m) | lost |")
+    print("|---|---|---|---|---|---|---|---|")
+    ate = res.metrics.get("ate", {}).get("rmse")
+    print(f"| | {len(ms)} | {culling.guided} | {np.median(ms):.1f} | {np.percentile(ms, 90):.1f} | "
+          f"{ms.mean():.1f} | {ate if ate is None else round(ate, 4)} | {res.metrics['lost']} |")
 
 
 if __name__ == "__main__":
