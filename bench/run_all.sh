@@ -63,6 +63,7 @@ for px in 8 15; do
         --config "{\"culling\": {\"culling\": {\"dilation_px\": $px}}}"
 done
 echo "## culling cost"; $PY bench/bench_culling.py "$BENCH_DIR/aug" --camera 7scenes --frames 60
+echo "## culling cost inside a run on real frames (Bonn, shipped MSNET)"; $PY bench/bench_culling.py "$SHARED/data/bonn_crowd_dev" --camera bonn --pipeline no-restoration
 echo "## restoration"; $PY bench/bench_inpainting.py "$BENCH_DIR/synth" "$BENCH_DIR/aug" --frames 15 --camera 7scenes --speed
 echo "## MSNET"
 $PY bench/bench_msnet.py --threads 1 --sequence "$BENCH_DIR/aug" \
