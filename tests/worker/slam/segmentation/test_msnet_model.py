@@ -6,6 +6,7 @@ import torch
 
 from worker.slam.errors import ConfigError
 from worker.slam.segmentation.msnet import MsnetConfig, build_msnet
+from worker.slam.segmentation.msnet.blocks import fold_batchnorm
 
 TINY = MsnetConfig(input_size=(64, 96), stem_channels=8, widths=(16, 16, 24), depths=(1, 1, 1), heads=2,
                    embed_dim=16, filters_per_class=4, decoder_layers=1)
@@ -54,3 +55,25 @@ def test_config_validation() -> None:
     with pytest.raises(ConfigError):
         MsnetConfig(dynamic_classes=("car",))
     assert MsnetConfig.from_dict(MsnetConfig().to_dict()) == MsnetConfig()
+
+
+def test_folded_batchnorm_gives_the_same_logits_and_leaves_the_model() -> None:
+    """BN statistics away from their defaults, then folded: the same logits to float rounding, no BatchNorm2d
+    left where a conv precedes it, and the original keeps its BN layers and its training mode."""
+    torch.manual_seed(0)
+    model = build_msnet(TINY)
+    for m in model.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.5, 0.5)
+            m.running_var.uniform_(0.5, 2.0)
+            m.weight.data.uniform_(0.5, 1.5)
+            m.bias.data.uniform_(-0.2, 0.2)
+    n_bn = sum(isinstance(m, torch.nn.BatchNorm2d) for m in model.modules())
+    folded = fold_batchnorm(model)
+    assert model.training and sum(isinstance(m, torch.nn.BatchNorm2d) for m in model.modules()) == n_bn > 0
+    assert sum(isinstance(m, torch.nn.BatchNorm2d) for m in folded.modules()) == 0 and not folded.training
+    x = torch.rand(1, 3, *TINY.input_size)
+    model.eval()
+    with torch.no_grad():
+        want, got = model(x).logits, folded(x).logits
+    assert torch.allclose(want, got, atol=1e-4) and not torch.equal(want, torch.zeros_like(want))

@@ -1,18 +1,34 @@
 """Small building blocks shared by the MSNET modules."""
 from __future__ import annotations
 
+import copy
+
 import torch
 import torch.nn.functional as F
 from torch import nn
+from torch.nn.utils.fusion import fuse_conv_bn_eval
 
 
 def conv_bn_act(c_in: int, c_out: int, kernel: int = 3, stride: int = 1) -> nn.Sequential:
-    """Conv + BatchNorm + ReLU; BN folds into the conv at inference so it costs nothing on CPU."""
+    """Conv + BatchNorm + ReLU; BN folds into the conv at inference (`fold_batchnorm`)."""
     return nn.Sequential(
         nn.Conv2d(c_in, c_out, kernel, stride, kernel // 2, bias=False),
         nn.BatchNorm2d(c_out),
         nn.ReLU(inplace=True),
     )
+
+
+def fold_batchnorm(model: nn.Module) -> nn.Module:
+    """An eval-mode copy of `model` with every BatchNorm2d that follows a Conv2d in a Sequential folded into the
+    conv's weights and bias (left as Identity): the same function up to float rounding, one pass fewer per
+    block (the BN passes were ~4 % of MSNET's CPU time). The original stays trainable."""
+    folded = copy.deepcopy(model).eval()
+    for seq in folded.modules():
+        if isinstance(seq, nn.Sequential):
+            for i in range(len(seq) - 1):
+                if isinstance(seq[i], nn.Conv2d) and isinstance(seq[i + 1], nn.BatchNorm2d):
+                    seq[i], seq[i + 1] = fuse_conv_bn_eval(seq[i], seq[i + 1]), nn.Identity()
+    return folded
 
 
 class Mlp(nn.Module):

@@ -9,6 +9,7 @@ import torch
 
 from worker.slam.segmentation.base import SegmentationResult, SegmenterConfig, check_rgb, labels_of
 from worker.slam.segmentation.guided import guided_upsample
+from worker.slam.segmentation.msnet.blocks import fold_batchnorm
 from worker.slam.segmentation.msnet.checkpoint import load_model
 from worker.slam.segmentation.msnet.model import MSNet
 
@@ -25,8 +26,9 @@ class MsnetSegmenter:
     def __init__(self, model: MSNet, device: torch.device, with_probs: bool = True,
                  dynamic_classes: tuple[str, ...] | None = None, guided_radius: int = 0,
                  guided_eps: float = 0.01) -> None:
-        # channels-last: the convolutions run ~12 % faster on CPU (oneDNN's native layout), same outputs
-        self.model = model.to(device).eval().to(memory_format=torch.channels_last)  # type: ignore[call-overload]
+        # BN folded into the convs (a copy: `model` stays as it was); channels-last: the convolutions run ~12 %
+        # faster on CPU (oneDNN's native layout), same outputs
+        self.model = fold_batchnorm(model.to(device)).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
         self.device = device
         self.with_probs = with_probs
         self.classes = model.cfg.classes
