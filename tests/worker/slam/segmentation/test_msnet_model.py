@@ -64,6 +64,7 @@ def test_folded_batchnorm_gives_the_same_logits_and_leaves_the_model() -> None:
     model = build_msnet(TINY)
     for m in model.modules():
         if isinstance(m, torch.nn.BatchNorm2d):
+            assert m.running_mean is not None and m.running_var is not None
             m.running_mean.uniform_(-0.5, 0.5)
             m.running_var.uniform_(0.5, 2.0)
             m.weight.data.uniform_(0.5, 1.5)

@@ -26,8 +26,9 @@ def fold_batchnorm(model: nn.Module) -> nn.Module:
     for seq in folded.modules():
         if isinstance(seq, nn.Sequential):
             for i in range(len(seq) - 1):
-                if isinstance(seq[i], nn.Conv2d) and isinstance(seq[i + 1], nn.BatchNorm2d):
-                    seq[i], seq[i + 1] = fuse_conv_bn_eval(seq[i], seq[i + 1]), nn.Identity()
+                conv, bn = seq[i], seq[i + 1]
+                if isinstance(conv, nn.Conv2d) and isinstance(bn, nn.BatchNorm2d):
+                    seq[i], seq[i + 1] = fuse_conv_bn_eval(conv, bn), nn.Identity()
     return folded
 
 
