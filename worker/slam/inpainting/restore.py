@@ -174,18 +174,24 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
 
 
 def _colour_gain(rgb: np.ndarray, hole: np.ndarray, ref_rgb: np.ndarray, landed: np.ndarray,
-                 region: tuple[int, int, int, int], min_pixels: int = 500) -> np.ndarray:
+                 region: tuple[int, int, int, int], min_pixels: int = 500, max_pixels: int = 20_000) -> np.ndarray:
     """(3,) target / reference colour ratio over the static target pixels of `region` that the reference's
     `landed` (h, w, 2) map covers; 1 where too few are shared to say. The median of per-pixel ratios: moving
     things outside the hole (a mask that missed them) or misregistered edges must not set it. Clipped to a
-    plausible exposure change."""
+    plausible exposure change. Of more than `max_pixels` shared pixels an even subsample is used: a median of
+    20 000 ratios is as good an estimate, and a large hole's region shares 100 000+ (17 ms per reference)."""
     y0, y1, x0, x1 = region
-    shared = ~hole[y0:y1, x0:x1] & (landed[..., 0] >= 0)
-    if shared.sum() < min_pixels:
+    ys, xs = np.nonzero(~hole[y0:y1, x0:x1] & (landed[..., 0] >= 0))
+    if len(ys) < min_pixels:
         return np.ones(3)
-    t = rgb[y0:y1, x0:x1][shared].astype(np.float64)
-    r = ref_rgb[landed[shared][:, 0], landed[shared][:, 1]].astype(np.float64)
+    if len(ys) > max_pixels:
+        step = -(-len(ys) // max_pixels)
+        ys, xs = ys[::step], xs[::step]
+    t = rgb[y0 + ys, x0 + xs].astype(np.float64)
+    src = landed[ys, xs]
+    r = ref_rgb[src[:, 0], src[:, 1]].astype(np.float64)
     bright = (t.min(1) > 16) & (r.min(1) > 16)  # ratios of dark pixels are mostly noise
     if bright.sum() < min_pixels:
         return np.ones(3)
-    return np.clip(np.median(t[bright] / r[bright], axis=0), 0.7, 1.4)
+    # channels as contiguous rows: numpy's median along a strided axis is ~2x slower (same values)
+    return np.clip(np.median(np.ascontiguousarray((t[bright] / r[bright]).T), axis=1), 0.7, 1.4)

@@ -5,7 +5,7 @@ import pytest
 from tests.worker.slam.inpainting.scene import H, K, W, pose, render, texture
 from worker.slam.inpainting.patchmatch import patchmatch_fill
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
-from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, restore_frame
+from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, _colour_gain, restore_frame
 from worker.slam.inpainting.stage import RestorationStageConfig
 from worker.slam.inpainting.warp import depth_in_target, forward_warp, relative_pose
 
@@ -200,3 +200,25 @@ def test_reference_exposure_is_matched_to_the_target():
     raw = restore_frame(rgb, depth, hole, pose(0.0), [ref], K, RestorationConfig(colour_gain=False))
     assert psnr(matched.rgb, rgb, hole) > psnr(raw.rgb, rgb, hole) + 6
     assert psnr(matched.rgb, rgb, hole) > 28
+
+
+def test_colour_gain_from_a_subsample_of_a_large_region():
+    """Exposure ratio 0.8 with per-pixel noise over a large shared region: the gain from an even subsample
+    matches the full median closely, and below `max_pixels` every pixel is used."""
+    rng = np.random.default_rng(4)
+    h, w = 300, 400
+    target = rng.integers(40, 220, (h, w, 3)).astype(np.uint8)
+    noise = rng.normal(1.0, 0.03, (h, w, 3))
+    ref = np.clip(target / 0.8 * noise, 0, 255).astype(np.uint8)
+    yy, xx = np.mgrid[0:h, 0:w]
+    landed = np.stack([yy, xx], -1)
+    hole = np.zeros((h, w), bool)
+    hole[100:200, 150:250] = True
+    region = (0, h, 0, w)
+    every = _colour_gain(target, hole, ref, landed, region, max_pixels=h * w)
+    some = _colour_gain(target, hole, ref, landed, region, max_pixels=5000)
+    assert np.allclose(every, 0.8, atol=0.01) and np.allclose(some, every, atol=0.005)
+    assert not np.array_equal(some, every)  # a subsample was taken
+    small = (0, 100, 0, 150)  # 15 000 shared pixels: under the default 20 000, all of them count
+    assert np.array_equal(_colour_gain(target, hole, ref, landed[:100, :150], small),
+                          _colour_gain(target, hole, ref, landed[:100, :150], small, max_pixels=10**9))
