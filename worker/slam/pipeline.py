@@ -123,7 +123,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
                          config.tracking.huber_px)
     closer = (LoopCloser(smap, config.loop, camera.K, tracker.bf, tracker.extractor.inv_sigma2)
               if config.loop.enabled else None)
-    run_ctx = StageContext(camera, config, tracker.extractor, sequence, load_truth(sequence.root))
+    run_ctx = StageContext(camera, config, sequence, load_truth(sequence.root))
     previews = _PreviewPicker(start, total)
     timer = _Timer()
     rel: list[tuple[int, np.ndarray]] = []  # per frame: (reference keyframe, T_ref_frame)

@@ -2,7 +2,7 @@
 
 A stage (segmentation, dynamic culling, restoration) runs before tracking. It gets the frame, the `FrameInputs`
 built so far and a `StageContext` -- a narrow, read-only view of the run (camera, config, predicted and last
-pose, the feature extractor, the sequence and its truth), never the tracker itself -- and returns updated
+pose, the sequence and its truth), never the tracker itself -- and returns updated
 `FrameInputs`; the pipeline hands their `track_inputs()` to the tracker.
 
 Two ways for a stage to keep work off the tracking path: `prepare(frame)` (work on the frame alone, run ahead
@@ -20,7 +20,6 @@ import numpy as np
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig
 from worker.slam.errors import ConfigError
-from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.types import Features
 from worker.slam.io.sequence import Frame, Sequence
 from worker.slam.tracking.inputs import TrackInputs
@@ -87,8 +86,6 @@ class StageContext:
 
     camera: Camera
     config: PipelineConfig
-    extractor: OrbExtractor
-    """The tracker's ORB extractor: a stage that extracts the frame's features uses the same settings."""
     sequence: Sequence | None
     """For reading neighbouring frames (random access, decoded on demand)."""
     truth: Truth | None = None

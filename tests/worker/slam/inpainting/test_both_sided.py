@@ -66,7 +66,7 @@ def run_stage(references: str) -> tuple[FrameInputs, RestorationStage, np.ndarra
         f = seq[i]
         gray = cv2.cvtColor(f.rgb, cv2.COLOR_RGB2GRAY)
         inputs = FrameInputs(features=extractor.extract(gray, f.depth, person(i)), dynamic_mask=person(i))
-        ctx = StageContext(camera, config, extractor, seq, None,  # type: ignore[arg-type]  # duck-typed
+        ctx = StageContext(camera, config, seq, None,  # type: ignore[arg-type]  # duck-typed
                            T_WC_pred=camera_pose(i), last=last)
         inputs = stage.process(f, inputs, ctx)
         last = TrackedPose(i, camera_pose(i), None)
