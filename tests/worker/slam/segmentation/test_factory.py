@@ -49,6 +49,35 @@ def test_msnet_backend_outputs_at_input_resolution(tiny_checkpoint: Path) -> Non
         seg.segment(rgb.astype(np.float32))
 
 
+def test_msnet_backend_runs_a_trace_with_the_eager_models_outputs(tiny_checkpoint: Path) -> None:
+    """The segmenter's traced forward gives the logits of the (BN-folded) eager model bit for bit, on frames
+    unlike the zeros it was traced with, and its probabilities are their softmax."""
+    import torch
+
+    seg = make_segmenter(SegmenterConfig(checkpoint=str(tiny_checkpoint), device="cpu"))
+    assert isinstance(seg._forward, torch.jit.ScriptModule)
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        rgb = rng.integers(0, 255, (120, 160, 3), dtype=np.uint8)
+        x = torch.rand(1, 3, *TINY.input_size).contiguous(memory_format=torch.channels_last)
+        with torch.inference_mode():
+            want, got = seg.model(x).logits, seg._forward(x)
+        assert torch.equal(want, got) and want.abs().max() > 0
+        probs = seg.predict_probs(rgb)
+        with torch.inference_mode():
+            eager = seg.model(_input(rgb, TINY.input_size)).logits.softmax(1)[0].permute(1, 2, 0).numpy()
+        np.testing.assert_array_equal(probs, eager)
+
+
+def _input(rgb: np.ndarray, size: tuple[int, int]):
+    import cv2
+    import torch
+
+    small = cv2.resize(rgb, (size[1], size[0]), interpolation=cv2.INTER_AREA)
+    x = torch.from_numpy(small).permute(2, 0, 1)[None].float().div_(255.0)
+    return x.contiguous(memory_format=torch.channels_last)
+
+
 def test_checkpoint_roundtrip_and_foreign_file(tiny_checkpoint: Path, tmp_path: Path) -> None:
     model, meta = load_model(tiny_checkpoint)
     assert model.cfg == TINY and meta == {"note": "test"}
