@@ -1,4 +1,5 @@
-"""Background restoration benchmark: PatchMatch (geometry-initialised) vs OpenCV's Telea inpainting.
+"""Background restoration benchmark: geometry-first restoration with each fill for unseen pixels (harmonic, Telea,
+PatchMatch) against OpenCV's Telea on the whole hole.
 
 For frames of a dynamic sequence with truth (`vtdslam synth` / `vtdslam augment` output), the true dynamic mask
 is the hole; references are chosen causally (past 15 frames) or both-sided (+-15 frames) with ground-truth poses
@@ -7,7 +8,11 @@ and true masks, so the figures isolate the restoration from tracking and segment
 holes, hole size and time/frame.
 
     .venv/bin/python bench/bench_inpainting.py SEQ_DIR [SEQ_DIR ...] [--frames 30] [--camera tum3] [--speed]
-        [--references causal,both-sided] [--unseen-fill patchmatch,telea] [--unseen-depth border|none]
+        [--references causal,both-sided] [--unseen-fill harmonic,telea,patchmatch] [--unseen-depth border|none]
+        [--static REAL_SEQ:CAMERA [--static-every 100] [--static-max-frames N]]
+
+`--static` uses real static frames as their own truth: artificial person-sized holes, no references, so the
+unseen-pixel fill does all the work (e.g. `--static ../shared/data/7scenes_redkitchen:7scenes`).
 """
 from __future__ import annotations
 
@@ -121,24 +126,68 @@ def bench_speed(root: Path, camera: str, config: RestorationConfig, index: int =
                   f"{100 * ok.sum() / max(has.sum(), 1):.0f} | {100 * err:.2f} |", flush=True)
 
 
+def bench_static(spec: str, fills: list[str], every: int, max_frames: int | None) -> None:
+    """Real static frames are their own truth: person-like ellipses (5, 15, 25 % of the image, left, centre,
+    right) restored with no reference, so every hole pixel is filled by the unseen-pixel fill; `spec` is
+    SEQ_DIR:CAMERA. Mean whole-hole PSNR and median CPU ms per fill."""
+    root, _, camera = spec.rpartition(":")
+    seq = Sequence(Path(root), parse_camera(camera))
+    n = min(len(seq), max_frames) if max_frames else len(seq)
+    frames = range(every // 2, n, every)
+    res: dict[tuple[float, str], list[tuple[float, float]]] = {}
+    for i in frames:
+        f = seq[i]
+        h, w = f.depth.shape
+        for frac in (0.05, 0.15, 0.25):
+            a = np.sqrt(frac * h * w / np.pi / 2.5)
+            for cx in (w // 4, w // 2, 3 * w // 4):
+                hole = cv2.ellipse(np.zeros((h, w), np.uint8), (cx, h // 2), (int(a), int(2.5 * a)),
+                                   0, 0, 360, 1, -1) > 0
+                for fill in fills:
+                    t0 = time.process_time()
+                    out = restore_frame(f.rgb, f.depth, hole, np.eye(4), [], seq.camera.K,
+                                        RestorationConfig(unseen_fill=fill))
+                    res.setdefault((frac, fill), []).append((restoration_psnr(out.rgb, f.rgb, hole),
+                                                             1000 * (time.process_time() - t0)))
+    print(f"\n| {Path(root).name}, frames {frames.start}-{frames.stop - 1} every {every}, no references | hole % | "
+          + " | ".join(f"{fill} PSNR (dB) | {fill} CPU ms" for fill in fills) + " |")
+    print("|---|---|" + "---|---|" * len(fills))
+    for frac in (0.05, 0.15, 0.25):
+        cells = [f"{np.mean([r[0] for r in res[(frac, f)]]):.2f} | {np.median([r[1] for r in res[(frac, f)]]):.0f}"
+                 for f in fills]
+        print(f"| | {100 * frac:.0f} | " + " | ".join(cells) + " |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("sequences", nargs="+", type=Path)
+    ap.add_argument("sequences", nargs="*", type=Path)
+    ap.add_argument("--static", action="append", default=[], metavar="SEQ_DIR:CAMERA",
+                    help="also fill artificial holes in a real static sequence's frames with no references "
+                         "(the frame is the truth); repeatable")
+    ap.add_argument("--static-every", type=int, default=100, help="every n-th frame of a --static sequence")
+    ap.add_argument("--static-max-frames", type=int, default=None,
+                    help="only the first n frames of a --static sequence (e.g. the people-free start)")
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--camera", default="tum3", help="preset when the sequence has no camera.json")
     ap.add_argument("--speed", action="store_true", help="also time restoration against hole size")
-    ap.add_argument("--unseen-fill", default="patchmatch,telea",
+    ap.add_argument("--unseen-fill", default="harmonic,telea,patchmatch",
                     help="fills to compare for pixels no reference sees (comma-separated)")
     ap.add_argument("--references", default="causal,both-sided",
                     help="reference windows to compare (comma-separated): causal = the past 15 frames, "
                          "both-sided = +-15 frames")
     ap.add_argument("--unseen-depth", default="border", help="depth of pixels no reference sees: border|none")
     args = ap.parse_args()
+    if not args.sequences and not args.static:
+        ap.error("give sequences with truth, --static SEQ_DIR:CAMERA, or both")
+    fills = args.unseen_fill.split(",")
+    for spec in args.static:
+        bench_static(spec, fills, args.static_every, args.static_max_frames)
+    if not args.sequences:
+        return
     print("| sequence | mode | frames | hole % | refs | hole seen by refs % | PSNR all (dB) | PSNR seen | "
           "PSNR unseen | Telea PSNR | depth median err (cm) | depth p90 err (cm) | depth err > 10 cm % | "
           "depth restored % | ms/frame |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    fills = args.unseen_fill.split(",")
     windows = args.references.split(",")
     for root, window, fill in itertools.product(args.sequences, windows, fills):
         config = RestorationConfig(unseen_fill=fill, unseen_depth=args.unseen_depth)

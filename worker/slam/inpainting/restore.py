@@ -14,9 +14,11 @@ import cv2
 import numpy as np
 
 from worker.slam.config import valid
-from worker.slam.inpainting.depth_fill import fill_depth_from_border
+from worker.slam.inpainting.border_fill import fill_depth_from_border, harmonic_fill
 from worker.slam.inpainting.patchmatch import PatchMatchConfig, patchmatch_fill
 from worker.slam.inpainting.warp import depth_in_target, forward_warp, relative_pose, sample_reference
+
+UNSEEN_FILLS = ("telea", "harmonic", "patchmatch")
 
 
 @dataclass(frozen=True)
@@ -26,16 +28,18 @@ class RestorationConfig:
     patchmatch: PatchMatchConfig = field(default_factory=PatchMatchConfig)
     use_target_as_source: bool = True
     """Let PatchMatch copy from the target's own static region where no reference sees the background."""
-    unseen_fill: str = "telea"
-    """How pixels no reference sees are filled: "telea" (OpenCV's smooth diffusion from the hole's border: it
-    invents no texture, hence no false ORB corners) or "patchmatch" (the paper: texture copied from the
-    references' and the frame's own static regions). Telea by default: against the true background copied
-    look-alike texture scores worse than a smooth guess and costs a full-image search (README, "Background
-    restoration"). Geometry-seen pixels are the same either way."""
+    unseen_fill: str = "harmonic"
+    """How pixels no reference sees are filled: "harmonic" (the smoothest continuation of the colours around
+    them, Laplace's equation with the border fixed, solved like the unseen depth, `border_fill`), "telea" (OpenCV's
+    fast-marching diffusion from the border) or "patchmatch" (the paper: texture copied from the references' and
+    the frame's own static regions). The smooth fills invent no texture, hence no false ORB corners; against the
+    true background copied look-alike texture scores worse than a smooth guess and costs a full-image search,
+    and harmonic beats Telea by 0.3-0.5 dB on real frames (README, "Background restoration"). Geometry-seen
+    pixels are the same either way."""
 
     def __post_init__(self) -> None:
-        if self.unseen_fill not in ("patchmatch", "telea"):
-            raise ValueError(f"unseen_fill must be 'patchmatch' or 'telea', not {self.unseen_fill!r}")
+        if self.unseen_fill not in UNSEEN_FILLS:
+            raise ValueError(f"unseen_fill must be one of {UNSEEN_FILLS}, not {self.unseen_fill!r}")
         if self.unseen_depth not in ("border", "none"):
             raise ValueError(f"unseen_depth must be 'border' or 'none', not {self.unseen_depth!r}")
     max_depth_cost: float = valid(0.002, 1e-6, 3.0)
@@ -49,7 +53,7 @@ class RestorationConfig:
     invalid."""
     unseen_depth: str = "border"
     """Depth of hole pixels that get none from a reference: "border" continues the surrounding surfaces
-    (inverse depth carried in from the hole's border, `depth_fill`), "none" leaves them invalid."""
+    (inverse depth carried in from the hole's border, `border_fill`), "none" leaves them invalid."""
     border_depth_confidence: float = valid(0.25, 0.0, 1.0)
     """Confidence of border-continued depth: below the restored-feature threshold, since a crease or an
     object hidden entirely inside the hole is guessed, not seen."""
@@ -141,6 +145,12 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
         out_rgb[y0:y1, x0:x1] = cv2.inpaint(np.ascontiguousarray(out_rgb[y0:y1, x0:x1]), fill, 3,
                                             cv2.INPAINT_TELEA)
         src_all[search], cost_all[search] = self_index, np.inf  # from the frame itself, with no depth
+    elif search.any() and config.unseen_fill == "harmonic":
+        fill = np.zeros_like(hole)
+        fill[py[search], px[search]] = True
+        col = harmonic_fill(out_rgb.astype(np.float32), ~fill, fill)
+        out_rgb[py[search], px[search]] = np.clip(col + 0.5, 0, 255).astype(np.uint8)
+        src_all[search], cost_all[search] = self_index, np.inf
     elif search.any():
         # PatchMatch visits only the pixels it must fill, so its cost scales with them, not the image.
         pm_hole = np.zeros_like(hole)

@@ -116,7 +116,8 @@ def test_depth_no_reference_sees_continues_the_surfaces_around_the_hole():
     assert np.array_equal(out.depth[~hole], person[~hole])
 
 
-def test_unseen_pixels_by_diffusion_keep_geometry_and_invent_no_corners():
+@pytest.mark.parametrize("smooth", ["harmonic", "telea"])
+def test_unseen_pixels_by_diffusion_keep_geometry_and_invent_no_corners(smooth):
     tex = texture(2)
     rgb, depth = render(pose(0.0), tex)
     r_rgb, r_depth = render(pose(0.05), tex)
@@ -125,22 +126,43 @@ def test_unseen_pixels_by_diffusion_keep_geometry_and_invent_no_corners():
     r_dyn = np.zeros((H, W), bool)
     r_dyn[:, W // 2 - 15:] = True
     ref = ReferenceView(r_rgb, r_depth, pose(0.05), r_dyn)
-    telea = restore_frame(rgb, depth, hole, pose(0.0), [ref], K, RestorationConfig(unseen_fill="telea"))
+    diffused = restore_frame(rgb, depth, hole, pose(0.0), [ref], K, RestorationConfig(unseen_fill=smooth))
     pm = restore_frame(rgb, depth, hole, pose(0.0), [ref], K, RestorationConfig(unseen_fill="patchmatch"))
-    seen = telea.seen_by_reference
+    seen = diffused.seen_by_reference
     assert 0.2 < seen.sum() / hole.sum() < 0.8
-    assert np.array_equal(telea.rgb[seen], pm.rgb[seen])  # geometry decides where a reference sees
+    assert np.array_equal(diffused.rgb[seen], pm.rgb[seen])  # geometry decides where a reference sees
     unseen = hole & ~seen
-    assert np.all(telea.depth_confidence[unseen] < telea.depth_confidence[seen].min())  # guessed, not seen
+    assert np.all(diffused.depth_confidence[unseen] < diffused.depth_confidence[seen].min())  # guessed, not seen
+    assert np.array_equal(diffused.rgb[~hole], rgb[~hole])
     inner = cv2.erode(unseen.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
 
     def corners_inside(img):
         kps = cv2.ORB_create(3000, fastThreshold=10).detect(cv2.cvtColor(img, cv2.COLOR_RGB2GRAY), None)
         return sum(inner[int(k.pt[1]), int(k.pt[0])] for k in kps)
     # a smooth fill invents (almost) no corners where copied texture does
-    assert corners_inside(telea.rgb) < 0.3 * corners_inside(pm.rgb)
+    assert corners_inside(diffused.rgb) < 0.3 * corners_inside(pm.rgb)
     with pytest.raises(ValueError, match="unseen_fill"):
         restore_frame(rgb, depth, hole, pose(0.0), [], K, RestorationConfig(unseen_fill="magic"))
+
+
+@pytest.mark.parametrize("frac_w", [0.05, 0.25])  # the large hole is solved on a coarser grid
+def test_harmonic_fill_continues_smooth_shading_exactly(frac_w):
+    """Colours that vary linearly across the image (a lit wall) are continued into a hole without error (a
+    harmonic interpolant reproduces affine functions, on the coarse grid too), where Telea's fill is off."""
+    y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+    truth = np.stack([40 + 0.5 * x, 200 - 0.4 * y, 90 + 0.2 * x + 0.25 * y], -1)
+    rgb = np.round(truth).astype(np.uint8)
+    hole = person_hole(frac_w=frac_w)
+    painted = rgb.copy()
+    painted[hole] = (255, 0, 255)  # the person, which no fill may show through
+    depth = np.full((H, W), 2.0, np.float32)
+    out = restore_frame(painted, depth, hole, pose(0.0), [], K, RestorationConfig(unseen_fill="harmonic"))
+    telea = restore_frame(painted, depth, hole, pose(0.0), [], K, RestorationConfig(unseen_fill="telea"))
+    err = np.abs(out.rgb[hole].astype(float) - truth[hole])
+    assert err.max() <= 1.0
+    assert np.abs(telea.rgb[hole].astype(float) - truth[hole]).mean() > 2 * err.mean() + 0.5
+    assert np.array_equal(out.rgb[~hole], rgb[~hole])
+    assert out.from_self == 1.0 and np.allclose(out.depth[hole], 2.0, atol=1e-4)
 
 
 def test_reference_selection_prefers_informative_moved_frames():
