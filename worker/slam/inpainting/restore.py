@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from numba import njit
 
 from worker.slam.config import valid
 from worker.slam.inpainting.border_fill import fill_depth_from_border, harmonic_fill
@@ -125,12 +126,13 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
     cost_all = np.zeros(len(py))
     out_rgb = rgb.copy()
     geo = init_src >= 0
+    d = np.zeros(len(py), np.float32)  # each hole pixel's depth in the target, through its match
     if config.geometry_first and geo.any():
         for s, ref in enumerate(refs):
             sel = np.flatnonzero(geo & (init_src == s))
             col = ref.rgb[init_yx[sel, 0], init_yx[sel, 1]]
+            d[sel] = z = depth_in_target(ref.depth, init_yx[sel], rel[s], K)
             if config.subpixel:
-                z = depth_in_target(ref.depth, init_yx[sel], rel[s], K)
                 sub, ok = sample_reference(ref.rgb, ~ref.dynamic, np.stack([py[sel], px[sel]], 1), z, rel[s], K)
                 col = np.where(ok[:, None], sub, col)
             out_rgb[py[sel], px[sel]] = np.clip(col * gains[s] + 0.5, 0, 255).astype(np.uint8)
@@ -159,10 +161,11 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
                               init_yx[search], config.patchmatch)
         out_rgb = res.rgb
         src_all[search], yx_all[search], cost_all[search] = res.source, res.yx, res.cost
-    d = np.zeros(len(py), np.float32)
+    todo = ~geo if config.geometry_first else np.ones(len(py), bool)  # geometry's matches have their depth
     for s, ref in enumerate(refs):
-        m = src_all == s
-        d[m] = depth_in_target(ref.depth, yx_all[m], rel[s], K)
+        m = todo & (src_all == s)
+        if m.any():
+            d[m] = depth_in_target(ref.depth, yx_all[m], rel[s], K)
     conf = np.exp(-cost_all / config.max_depth_cost).astype(np.float32)
     ok = (cost_all <= config.max_depth_cost) & (d > 0) & (geo | config.searched_depth)
     out_depth = depth.copy()
@@ -190,18 +193,40 @@ def _colour_gain(rgb: np.ndarray, hole: np.ndarray, ref_rgb: np.ndarray, landed:
     things outside the hole (a mask that missed them) or misregistered edges must not set it. Clipped to a
     plausible exposure change. Of more than `max_pixels` shared pixels an even subsample is used: a median of
     20 000 ratios is as good an estimate, and a large hole's region shares 100 000+ (17 ms per reference)."""
-    y0, y1, x0, x1 = region
-    ys, xs = np.nonzero(~hole[y0:y1, x0:x1] & (landed[..., 0] >= 0))
-    if len(ys) < min_pixels:
+    y0, _, x0, _ = region
+    shared, ratios = _shared_ratios(rgb, hole, ref_rgb, landed, y0, x0, max_pixels)
+    if shared < min_pixels or ratios.shape[1] < min_pixels:
         return np.ones(3)
-    if len(ys) > max_pixels:
-        step = -(-len(ys) // max_pixels)
-        ys, xs = ys[::step], xs[::step]
-    t = rgb[y0 + ys, x0 + xs].astype(np.float64)
-    src = landed[ys, xs]
-    r = ref_rgb[src[:, 0], src[:, 1]].astype(np.float64)
-    bright = (t.min(1) > 16) & (r.min(1) > 16)  # ratios of dark pixels are mostly noise
-    if bright.sum() < min_pixels:
-        return np.ones(3)
-    # channels as contiguous rows: numpy's median along a strided axis is ~2x slower (same values)
-    return np.clip(np.median(np.ascontiguousarray((t[bright] / r[bright]).T), axis=1), 0.7, 1.4)
+    return np.clip(np.median(ratios, axis=1), 0.7, 1.4)
+
+
+@njit(cache=True)
+def _shared_ratios(rgb, hole, ref_rgb, landed, y0, x0, max_pixels):
+    """(number of shared pixels, (3, m) float64 target / reference ratios of the bright ones among every step-th
+    shared pixel in row-major order): one pass to count, one to sample, no index arrays. Channels as rows, so
+    numpy's median reads them contiguously."""
+    h, w = landed.shape[0], landed.shape[1]
+    n = 0
+    for y in range(h):
+        for x in range(w):
+            if landed[y, x, 0] >= 0 and not hole[y0 + y, x0 + x]:
+                n += 1
+    step = (n + max_pixels - 1) // max_pixels if n > max_pixels else 1
+    out = np.empty((3, (n + step - 1) // step if n else 0))
+    i = m = 0
+    for y in range(h):
+        for x in range(w):
+            if landed[y, x, 0] < 0 or hole[y0 + y, x0 + x]:
+                continue
+            if i % step == 0:
+                ry, rx = landed[y, x, 0], landed[y, x, 1]
+                t0, t1, t2 = rgb[y0 + y, x0 + x, 0], rgb[y0 + y, x0 + x, 1], rgb[y0 + y, x0 + x, 2]
+                r0, r1, r2 = ref_rgb[ry, rx, 0], ref_rgb[ry, rx, 1], ref_rgb[ry, rx, 2]
+                # ratios of dark pixels are mostly noise
+                if min(t0, t1, t2) > 16 and min(r0, r1, r2) > 16:
+                    out[0, m] = np.float64(t0) / np.float64(r0)
+                    out[1, m] = np.float64(t1) / np.float64(r1)
+                    out[2, m] = np.float64(t2) / np.float64(r2)
+                    m += 1
+            i += 1
+    return n, out[:, :m]
