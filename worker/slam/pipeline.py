@@ -14,16 +14,17 @@ and tracked. Results are the same either way. `timings_ms[stage]` stays the stag
 `metrics['overlapped_stages']` names the stages that ran ahead.
 
 Deferred work: a stage whose output tracking does not read may leave it in `FrameInputs.deferred` (restoration
-on demand); it runs after tracking only when the frame became a keyframe or a preview is due, on a background
-thread behind the pipeline thread (`restore_behind`; its results are stored in frame order, the same as in
-line), and its time is added to the stage's own entry for that frame.
+on demand); it runs after tracking only when the frame became a keyframe or a preview is due, and not before
+`FrameInputs.deferred_delay` later frames went through the stages (restoration takes them for references), on a
+background thread behind the pipeline thread (`restore_behind`; its results are stored in frame order, the same
+as in line), and its time is added to the stage's own entry for that frame.
 """
 from __future__ import annotations
 
 import json
 import resource
 import time
-from collections import defaultdict
+from collections import defaultdict, deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from itertools import chain
@@ -139,6 +140,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     with PrepareAhead(_preparers(stages) if prepare_ahead and read_ahead > 0 else {}) as prep, \
             ReadAhead(lambda i: prep.submit(sequence[i]), range(start + 1, stop), read_ahead) as ahead, \
             WorkBehind(restore_behind) as behind:
+        waiting: deque[_Deferred] = deque()  # deferred work that waits for later frames, by when it may start
         frames: Iterator[Prepared] = chain([prep.submit(first)], ahead)
         for k in range(total):
             if should_cancel is not None and should_cancel():
@@ -182,7 +184,9 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
                    **{k2: v for k2, v in inputs.info.items() if isinstance(v, (int, float))}}
             frame_info.append(row)
             if inputs.deferred is not None and deferred_by is not None:
-                _defer(behind, inputs, res, previews, config.dense.stride, timer.ms[deferred_by], row, stage_info)
+                _defer(waiting, inputs, res, previews, config.dense.stride, timer.ms[deferred_by], row, stage_info)
+            while waiting and waiting[0][0] <= frame.index:  # their later frames have gone through the stages
+                behind.submit(*waiting.popleft()[1:])
             behind.collect()
             n_reloc += int(res.relocalised)
             n_new_maps += int(res.new_map)
@@ -190,6 +194,8 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
             rel.append(_relative(smap, res))
             if progress is not None:
                 progress(k + 1, total, "tracking")
+        while waiting:  # the last frames' deferred work: the frames it waited for do not exist
+            behind.submit(*waiting.popleft()[1:])
         behind.finish()  # the keyframes' restored images and the previews, before the dense map
     loop_s = time.perf_counter() - t_loop
     if config.mapping.final_global_ba:
@@ -246,13 +252,17 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     return result
 
 
-def _defer(behind: WorkBehind, inputs: FrameInputs, res: TrackResult, previews: _PreviewPicker, stride: int,
-           stage_ms: list[float], row: dict, stage_info: dict[str, list[float]]) -> None:
-    """Hand `behind` the work a stage deferred (restoration) when this frame became a keyframe or a preview is
-    due (dropped otherwise: it holds the frame's images). When it is done: the keyframe gets the restored images
-    the tracker would have stored had they been there when it tracked, the previews their slot (claimed now, in
-    frame order, as if they had been offered now), the frame's figures its `row` and `stage_info`, and its time
-    the stage's entry for this frame."""
+_Deferred = tuple[int, Callable[[], float], Callable[[float], None]]
+"""(frame index after whose stages the work may start, work, done), for `WorkBehind.submit`."""
+
+
+def _defer(waiting: deque[_Deferred], inputs: FrameInputs, res: TrackResult, previews: _PreviewPicker,
+           stride: int, stage_ms: list[float], row: dict, stage_info: dict[str, list[float]]) -> None:
+    """Queue in `waiting` the work a stage deferred (restoration) when this frame became a keyframe or a preview
+    is due (dropped otherwise: it holds the frame's images), to start `inputs.deferred_delay` frames later. When
+    it is done: the keyframe gets the restored images the tracker would have stored had they been there when it
+    tracked, the previews their slot (claimed now, in frame order, as if they had been offered now), the frame's
+    figures its `row` and `stage_info`, and its time the stage's entry for this frame."""
     deferred, inputs.deferred = inputs.deferred, None
     why = "keyframe" if res.keyframe is not None else "preview" if previews.wants(res.index) else None
     if deferred is None or why is None:
@@ -276,7 +286,7 @@ def _defer(behind: WorkBehind, inputs: FrameInputs, res: TrackResult, previews: 
             stage_info[key].append(val)
             row[key] = out.info[key]
 
-    behind.submit(work, done)
+    waiting.append((res.index + inputs.deferred_delay, work, done))
 
 
 def _numbers(info: dict) -> dict[str, float]:

@@ -60,6 +60,9 @@ class FrameInputs:
     depth comes from restored pixels): `deferred(inputs, why)` (why: 'keyframe' or 'preview') fills the frame's
     final inputs' `restored_rgb`, `restored_depth`, `previews` and `info` as `process` would have. The pipeline
     calls it after tracking only when the frame became a keyframe or a preview is due, and drops it otherwise."""
+    deferred_delay: int = 0
+    """Frames that must go through the stages after this one before `deferred` may run (e.g. restoration that
+    takes the next frames, as tracked, for references)."""
 
     def track_inputs(self) -> TrackInputs:
         """The part the tracker reads."""

@@ -7,6 +7,7 @@ import json
 import pytest
 
 from worker.slam.camera import PRESETS
+from worker.slam.inpainting.stage import RestorationStage
 from worker.slam.io.sequence import Sequence
 from worker.slam.pipeline import run_pipeline
 from worker.slam.presets import get_preset
@@ -47,8 +48,9 @@ def test_truth_masks_have_nothing_to_run_ahead(people_seq):
 
 
 def test_restoration_on_demand_gives_the_same_outputs_and_restores_fewer_frames(people_seq, tmp_path):
+    # references read ahead either way (a restoration tracking reads cannot wait for the frames to be tracked)
     for on_demand in (False, True):
-        cfg = get_preset("full", {"restoration.on_demand": on_demand})
+        cfg = get_preset("full", {"restoration.on_demand": on_demand, "restoration.deferred_future": "lookahead"})
         run_pipeline(Sequence(people_seq, PRESETS["tum3"]), cfg, tmp_path / str(on_demand))
     every, lazy = tmp_path / "False", tmp_path / "True"
     for name in ("trajectory.txt", "keyframes.txt", "map.ply"):
@@ -91,3 +93,27 @@ def test_restoration_behind_gives_the_same_outputs(people_seq, tmp_path):
     m0, m1 = (json.loads((d / "metrics.json").read_text()) for d in (inline, behind_dir))
     assert m1["restoration"] == m0["restoration"] and m1["stage_info"] == m0["stage_info"]
     assert m0["restoration"]["restored_for"].get("keyframe", 0) > 0  # there was deferred work to move
+
+
+def test_deferred_restoration_takes_the_next_frames_as_tracked(people_seq, tmp_path, monkeypatch):
+    """Keyframes and previews wait for the next `window` frames and take them with the tracker's poses and
+    culling's masks: nothing is read ahead or posed by PnP, tracking is untouched, the restored background is
+    at least as close to the truth as with references read ahead, and the last frames (no future) still get
+    theirs."""
+    runs = {}
+    for mode in ("lookahead", "tracked"):
+        cfg = get_preset("full", {"restoration.deferred_future": mode})
+        if mode == "tracked":
+            def no_lookahead(*args, **kwargs):
+                raise AssertionError("a deferred restoration read frames ahead")
+            monkeypatch.setattr(RestorationStage, "_future_poses", no_lookahead)
+        runs[mode] = run_pipeline(Sequence(people_seq, PRESETS["tum3"]), cfg, tmp_path / mode)
+    ahead, tracked = tmp_path / "lookahead", tmp_path / "tracked"
+    for name in ("trajectory.txt", "keyframes.txt"):
+        assert (tracked / name).read_bytes() == (ahead / name).read_bytes(), name
+    assert (tracked / "map.ply").read_bytes() != (ahead / "map.ply").read_bytes()
+    m0, m1 = (runs[m].metrics["restoration"] for m in ("lookahead", "tracked"))
+    assert m1["deferred_future"] == "tracked" and m0["deferred_future"] == "lookahead"
+    assert m1["restored_for"] == m0["restored_for"] and m1["restored_for"].get("keyframe", 0) > 0
+    assert m1["future_references"] > 0
+    assert m1["truth"]["restoration_psnr"] >= m0["truth"]["restoration_psnr"] - 0.1

@@ -2,9 +2,11 @@
 
 References (`references`): "causal" takes them from the last `window` frames, whose poses the tracker has
 already estimated and whose moving pixels culling has marked (streaming input has nothing else); "both-sided"
-(a job's uploaded sequence) adds the next `window` frames, read ahead through the sequence, with pose and moving
-pixels estimated against the target by geometry (`lookahead`). The target's own pose is the motion model's
-prediction (geometry-first copying and PatchMatch absorb its small error). The restored RGB and
+(a job's uploaded sequence) adds the next `window` frames. A deferred restoration (below) waits until they have
+been tracked and takes them like the past ones, with the target at its own tracked pose (`deferred_future:
+tracked`); one that tracking reads at once reads them ahead through the sequence, with pose and moving pixels
+estimated against the target by geometry (`lookahead`), and the target at the motion model's prediction
+(geometry-first copying and PatchMatch absorb its small error). The restored RGB and
 depth replace the raw frame for keypoint depth and the dense map, and ORB keypoints found in the restored region
 (strong response, confident depth, seen by a reference) are handed to the tracker as extra features.
 
@@ -66,9 +68,18 @@ class RestorationStageConfig:
     restoration changed no output but the restoration metrics, and cost most of the frame's time. False:
     every frame with a hole is restored (the restoration metrics then cover all of them)."""
 
+    deferred_future: str = "tracked"
+    """Future references of a deferred restoration (a keyframe's or a preview's: nothing reads them before the run
+    ends), with "both-sided": "tracked" waits until the next `window` frames have been tracked and takes them as
+    the past ones are taken (the tracker's poses, culling's moving pixels), with the target at its own tracked
+    pose; "lookahead" reads them ahead, poses them by PnP against the target at its predicted pose and finds
+    their moving pixels by geometry, as a restoration that tracking reads at once always does."""
+
     def __post_init__(self) -> None:
         if self.references not in ("causal", "both-sided"):
             raise ValueError(f"references must be 'causal' or 'both-sided', not {self.references!r}")
+        if self.deferred_future not in ("tracked", "lookahead"):
+            raise ValueError(f"deferred_future must be 'tracked' or 'lookahead', not {self.deferred_future!r}")
 
 
 @dataclass
@@ -79,6 +90,15 @@ class _Past:
     dynamic: np.ndarray
     desc: np.ndarray | None
     T_WC: np.ndarray | None = None
+    """Set when the next frame arrives: the tracker's pose for it, None if it was lost."""
+
+
+@dataclass(frozen=True)
+class _Tracked:
+    """A deferred restoration's view of its target and of the frames after it, filled as they are tracked."""
+
+    own: _Past
+    future: list[_Past]
 
 
 class RestorationStage:
@@ -90,6 +110,8 @@ class RestorationStage:
         self.past: deque[_Past] = deque(maxlen=self.cfg.selection.window)
         self.ahead: dict[int, tuple[Frame, Features]] = {}
         """Future frames read for both-sided references, with their ORB features, by index."""
+        self.collecting: dict[int, list[_Past]] = {}
+        """The frames after a target whose deferred restoration waits for them ("tracked"), by target index."""
         self.future_refs = 0
         self.psnr: list[float] = []
         self.depth_err: list[float] = []
@@ -116,16 +138,27 @@ class RestorationStage:
         self._record_pose(ctx)
         hole = inputs.dynamic_mask if inputs.dynamic_mask is not None else np.zeros(frame.depth.shape, bool)
         desc = inputs.features.desc if inputs.features is not None else None
+        own = _Past(frame.index, frame.rgb, frame.depth, hole, desc)
+        window = self.cfg.selection.window
+        for k in list(self.collecting):
+            if frame.index - k > window:  # complete: this frame's `_record_pose` gave the last one its pose
+                del self.collecting[k]
+            else:
+                self.collecting[k].append(own)
         # before the first tracked frame there is no pose to warp into
         if hole.mean() >= self.cfg.min_hole_fraction and ctx.T_WC_pred is not None:
             past = list(self.past)  # the references as they are now: a deferred call must see the same
             inputs.info["hole_fraction"] = float(hole.mean())  # every frame with a hole, restored or not
             if self.cfg.on_demand and not self._tracking_reads(hole, inputs, ctx):
                 self.deferred += 1
-                inputs.deferred = lambda out, why: self._restore(frame, hole, desc, out, ctx, past, why)
+                tracked: _Tracked | None = None
+                if self.cfg.references == "both-sided" and self.cfg.deferred_future == "tracked":
+                    tracked = _Tracked(own, self.collecting.setdefault(frame.index, []))
+                    inputs.deferred_delay = window + 1  # until the last future frame has its pose
+                inputs.deferred = lambda out, why: self._restore(frame, hole, desc, out, ctx, past, why, tracked)
             else:
                 self._restore(frame, hole, desc, inputs, ctx, past, "tracking")
-        self.past.append(_Past(frame.index, frame.rgb, frame.depth, hole, desc))
+        self.past.append(own)
         return inputs
 
     def _tracking_reads(self, hole: np.ndarray, inputs: FrameInputs, ctx: StageContext) -> bool:
@@ -149,23 +182,27 @@ class RestorationStage:
         return bool(np.any(cum[yb, xb] - cum[ya, xb] - cum[yb, xa] + cum[ya, xa] > 0))
 
     def _restore(self, frame: Frame, hole: np.ndarray, desc: np.ndarray | None, inputs: FrameInputs,
-                 ctx: StageContext, past: list[_Past], why: str) -> None:
+                 ctx: StageContext, past: list[_Past], why: str, tracked: _Tracked | None = None) -> None:
         with self._lock:
-            self._restore_locked(frame, hole, desc, inputs, ctx, past, why)
+            self._restore_locked(frame, hole, desc, inputs, ctx, past, why, tracked)
 
     def _restore_locked(self, frame: Frame, hole: np.ndarray, desc: np.ndarray | None, inputs: FrameInputs,
-                        ctx: StageContext, past: list[_Past], why: str) -> None:
+                        ctx: StageContext, past: list[_Past], why: str, tracked: _Tracked | None) -> None:
         T_pred = ctx.T_WC_pred
         assert T_pred is not None
         both = self.cfg.references == "both-sided"
         views: dict[int, ReferenceView] = {}
         cands: list[Candidate] = []
+        if tracked is not None:
+            # the target where the tracker put it (if it was tracked), and the frames after it as tracked
+            T_pred = tracked.own.T_WC if tracked.own.T_WC is not None else T_pred
+            past = past + tracked.future
         for p in past:
             if p.T_WC is not None:
                 views[p.index] = ReferenceView(p.rgb, p.depth, p.T_WC, p.dynamic)
                 cands.append(Candidate(p.index, p.T_WC, p.desc))
         future: dict[int, tuple[Frame, np.ndarray]] = {}
-        if both and inputs.features is not None:
+        if both and tracked is None and inputs.features is not None:
             future = self._future_poses(frame, hole, inputs.features, T_pred, ctx)
             cands += [Candidate(j, T_WC, self.ahead[j][1].desc) for j, (_, T_WC) in future.items()]
         sel = select_references(Candidate(frame.index, T_pred, desc), cands, self.cfg.selection, both)
@@ -177,6 +214,8 @@ class RestorationStage:
                 dyn = moving_pixels(f.depth, T_ft, frame.depth, hole, self.camera.K, self.cfg.lookahead)
                 views[j] = ReferenceView(f.rgb, f.depth, T_WC, dyn)
                 self.future_refs += 1
+        if tracked is not None:
+            self.future_refs += sum(i > frame.index for i in sel.indices)
         refs = [views[i] for i in sel.indices]
         out = restore_frame(frame.rgb, frame.depth, hole, T_pred, refs, self.camera.K, self.cfg.restoration)
         inputs.restored_rgb, inputs.restored_depth = out.rgb, out.depth
@@ -239,6 +278,7 @@ class RestorationStage:
 
     def summary(self) -> dict:
         out: dict = {"references": self.cfg.references, "restored_frames": self.restored_frames,
+                     "deferred_future": self.cfg.deferred_future if self.cfg.references == "both-sided" else None,
                      "restored_for": dict(sorted(self.restored_for.items())),
                      "not_restored": self.deferred - self.restored_for["keyframe"] - self.restored_for["preview"],
                      "future_references": self.future_refs, "restored_features": self.extra,
