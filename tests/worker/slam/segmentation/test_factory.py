@@ -54,8 +54,10 @@ def test_msnet_backend_runs_a_trace_with_the_eager_models_outputs(tiny_checkpoin
     unlike the zeros it was traced with, and its probabilities are their softmax."""
     import torch
 
+    from worker.slam.segmentation.msnet.segmenter import MsnetSegmenter
+
     seg = make_segmenter(SegmenterConfig(checkpoint=str(tiny_checkpoint), device="cpu"))
-    assert isinstance(seg._forward, torch.jit.ScriptModule)
+    assert isinstance(seg, MsnetSegmenter) and isinstance(seg._forward, torch.jit.ScriptModule)
     rng = np.random.default_rng(1)
     for _ in range(3):
         rgb = rng.integers(0, 255, (120, 160, 3), dtype=np.uint8)
