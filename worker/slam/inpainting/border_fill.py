@@ -11,6 +11,8 @@ hidden background than Telea's fast-marching fill.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import cv2
 import numpy as np
 import scipy.sparse as sp
@@ -20,31 +22,40 @@ _MAX_UNKNOWNS = 6000
 """The grid is coarsened (2x per step) until at most this many pixels are unknown: the solve's cost."""
 
 
+Window = Callable[[slice, slice], tuple[np.ndarray, np.ndarray]]
+"""(rows, cols) of the image -> its values there (h, w, C) and which of them are known (h, w) bool."""
+
+
 def fill_depth_from_border(depth: np.ndarray, fill: np.ndarray) -> np.ndarray:
     """Depth (N,) float32 m for the N pixels of `fill` (H, W) bool, row-major, from `depth` (H, W) float32 m
     (0 = unknown; pixels of `fill` are ignored). 0 where no known depth is connected to continue from."""
-    known = (depth > 0) & ~fill
-    inv = np.where(known, 1.0 / np.where(known, depth, 1.0), 0.0)
-    q = harmonic_fill(inv[..., None], known, fill)[:, 0]
+    def inverse_depth(rows: slice, cols: slice) -> tuple[np.ndarray, np.ndarray]:
+        d = depth[rows, cols]
+        known = d > 0
+        return np.where(known, 1.0 / np.where(known, d, 1.0), 0.0)[..., None], known
+
+    q = harmonic_fill(fill, inverse_depth)[:, 0]
     return np.where(q > 1e-6, 1.0 / np.maximum(q, 1e-6), 0.0).astype(np.float32)
 
 
-def harmonic_fill(values: np.ndarray, known: np.ndarray, fill: np.ndarray) -> np.ndarray:
-    """(N, C) float64 for the N pixels of `fill` (H, W) bool, row-major: the harmonic interpolant of `values`
-    (H, W, C) from its `known` (H, W) bool pixels, all channels in one solve. 0 where no known pixel is
-    connected (on the coarse grid: also next to a coarse pixel nothing reached)."""
+def harmonic_fill(fill: np.ndarray, window: Window) -> np.ndarray:
+    """(N, C) float64 for the N pixels of `fill` (H, W) bool, row-major: the harmonic interpolant of the image
+    `window` reads (only around `fill`, so per-pixel work stays there) from its known pixels outside `fill`,
+    all channels in one solve. 0 where no known pixel is connected (on the coarse grid: also next to a coarse
+    pixel nothing reached)."""
     h, w = fill.shape
     fy, fx = np.nonzero(fill)
-    if len(fy) == 0:
-        return np.zeros((0, values.shape[2]))
     scale = 1
     while len(fy) / scale**2 > _MAX_UNKNOWNS:
         scale *= 2
     m = 2 * scale
-    y0, y1 = max(int(fy.min()) - m, 0), min(int(fy.max()) + m + 1, h)
-    x0, x1 = max(int(fx.min()) - m, 0), min(int(fx.max()) + m + 1, w)
-    known = known[y0:y1, x0:x1] & ~fill[y0:y1, x0:x1]
-    val = np.where(known[..., None], values[y0:y1, x0:x1], 0.0)
+    y0, y1 = (max(int(fy.min()) - m, 0), min(int(fy.max()) + m + 1, h)) if len(fy) else (0, 0)
+    x0, x1 = (max(int(fx.min()) - m, 0), min(int(fx.max()) + m + 1, w)) if len(fx) else (0, 0)
+    values, known = window(slice(y0, y1), slice(x0, x1))
+    if len(fy) == 0:
+        return np.zeros((0, values.shape[2]))
+    known = known & ~fill[y0:y1, x0:x1]
+    val = np.where(known[..., None], values, 0.0)
     if scale > 1:
         # a coarse pixel is known only if its whole block is (no unknown value averaged in)
         ch, cw = -(-(y1 - y0) // scale), -(-(x1 - x0) // scale)

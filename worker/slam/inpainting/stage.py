@@ -188,14 +188,14 @@ class RestorationStage:
 
     def _restore_locked(self, frame: Frame, hole: np.ndarray, desc: np.ndarray | None, inputs: FrameInputs,
                         ctx: StageContext, past: list[_Past], why: str, tracked: _Tracked | None) -> None:
-        T_pred = ctx.T_WC_pred
-        assert T_pred is not None
+        T_target = ctx.T_WC_pred
+        assert T_target is not None
         both = self.cfg.references == "both-sided"
         views: dict[int, ReferenceView] = {}
         cands: list[Candidate] = []
         if tracked is not None:
             # the target where the tracker put it (if it was tracked), and the frames after it as tracked
-            T_pred = tracked.own.T_WC if tracked.own.T_WC is not None else T_pred
+            T_target = tracked.own.T_WC if tracked.own.T_WC is not None else T_target
             past = past + tracked.future
         for p in past:
             if p.T_WC is not None:
@@ -203,21 +203,21 @@ class RestorationStage:
                 cands.append(Candidate(p.index, p.T_WC, p.desc))
         future: dict[int, tuple[Frame, np.ndarray]] = {}
         if both and tracked is None and inputs.features is not None:
-            future = self._future_poses(frame, hole, inputs.features, T_pred, ctx)
+            future = self._future_poses(frame, hole, inputs.features, T_target, ctx)
             cands += [Candidate(j, T_WC, self.ahead[j][1].desc) for j, (_, T_WC) in future.items()]
-        sel = select_references(Candidate(frame.index, T_pred, desc), cands, self.cfg.selection, both)
+        sel = select_references(Candidate(frame.index, T_target, desc), cands, self.cfg.selection, both)
         self.relaxed += int(sel.relaxed)
         for j in sel.indices:
             if j in future:  # moving pixels only for the chosen: the test costs a full-image warp
                 f, T_WC = future[j]
-                T_ft = np.linalg.inv(T_WC) @ T_pred
+                T_ft = np.linalg.inv(T_WC) @ T_target
                 dyn = moving_pixels(f.depth, T_ft, frame.depth, hole, self.camera.K, self.cfg.lookahead)
                 views[j] = ReferenceView(f.rgb, f.depth, T_WC, dyn)
                 self.future_refs += 1
         if tracked is not None:
             self.future_refs += sum(i > frame.index for i in sel.indices)
         refs = [views[i] for i in sel.indices]
-        out = restore_frame(frame.rgb, frame.depth, hole, T_pred, refs, self.camera.K, self.cfg.restoration)
+        out = restore_frame(frame.rgb, frame.depth, hole, T_target, refs, self.camera.K, self.cfg.restoration)
         inputs.restored_rgb, inputs.restored_depth = out.rgb, out.depth
         inputs.deferred = None
         self.restored_frames += 1
