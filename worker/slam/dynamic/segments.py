@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from numba import njit
 
 
 def depth_edges(depth: np.ndarray, rel_jump: float = 0.05) -> np.ndarray:
@@ -42,26 +43,81 @@ def split_segments(mask: np.ndarray, depth: np.ndarray, min_area: int = 200,
 
 
 def _split(m: np.ndarray, depth: np.ndarray, min_area: int, rel_jump: float) -> np.ndarray:
-    inner = m & ~depth_edges(depth, rel_jump)
-    # OpenCV's components without its statistics and the areas counted here: two thirds of the time of
-    # `connectedComponentsWithStats` on VGA frames
-    n, labels = cv2.connectedComponents(inner.view(np.uint8), connectivity=4)
-    area = np.bincount(labels.ravel(), minlength=n)
-    # uint16 labels (VGA: at most H*W/min_area = 1536 segments): OpenCV dilates them directly, no float copies
-    keep = np.zeros(n, np.uint16 if n <= np.iinfo(np.uint16).max else np.float32)
-    big = np.flatnonzero(area[1:] >= min_area) + 1
-    keep[big] = np.arange(1, len(big) + 1)
-    grown = np.take(keep, labels)  # = keep[labels]; numpy's fancy indexing by a 2-D array is slower
-    # Give the cut-out edge pixels (and small fragments) of the mask to the nearest kept segment.
+    # the mask without depth edges in one compiled pass over OpenCV's logarithm (`depth_edges`' arithmetic)
+    d = depth.astype(np.float32, copy=False)
+    inner = _inner(m, d, cv2.log(np.maximum(d, np.float32(1e-3))), np.float32(np.log1p(rel_jump)))
+    # OpenCV's components without its statistics: two thirds of the time of `connectedComponentsWithStats`
+    n, labels = cv2.connectedComponents(inner, connectivity=4)
+    # uint16 labels (VGA: at most H*W/min_area = 1536 segments): OpenCV dilates them directly
+    grown = _renumber(labels, n, min_area, np.uint16(0) if n <= np.iinfo(np.uint16).max else np.float32(0))
+    # Give the cut-out edge pixels (and small fragments) of the mask to the nearest kept segment (OpenCV's
+    # dilation of the whole box, then a compiled fill; its vector max beat a compiled one at the pixels to fill
+    # alone, 0.9 against 4.8 ms on a Bonn frame)
     square = np.ones((5, 5), np.uint8)
     for _ in range(3):
-        todo = m & (grown == 0)
-        if not todo.any():
+        if not _fill_from(grown, cv2.dilate(grown, square), m):
             break
-        dil = cv2.dilate(grown, square)
-        fill = todo & (dil > 0)
-        grown[fill] = dil[fill]
-    return grown.astype(np.int32)
+    return grown
+
+
+@njit(cache=True, nogil=True)
+def _fill_from(grown, dil, m):
+    """`grown` (H, W) takes `dil` where `m` holds, `grown` is 0 and `dil` is not; True if any such pixel of `m`
+    is still 0 after."""
+    h, w = grown.shape
+    left = False
+    for y in range(h):
+        for x in range(w):
+            if m[y, x] and grown[y, x] == 0:
+                if dil[y, x] > 0:
+                    grown[y, x] = dil[y, x]
+                else:
+                    left = True
+    return left
+
+
+@njit(cache=True, nogil=True)
+def _inner(m, depth, log_d, c):
+    """uint8 (H, W): 1 where `m` holds, depth is valid and |Δ log depth| to every 4-neighbour is at most `c`."""
+    h, w = m.shape
+    out = np.zeros((h, w), np.uint8)
+    for y in range(h):
+        for x in range(w):
+            if not m[y, x] or depth[y, x] <= 0:
+                continue
+            v = log_d[y, x]
+            if (y > 0 and abs(v - log_d[y - 1, x]) > c) or (y + 1 < h and abs(v - log_d[y + 1, x]) > c) or \
+                    (x > 0 and abs(v - log_d[y, x - 1]) > c) or (x + 1 < w and abs(v - log_d[y, x + 1]) > c):
+                continue
+            out[y, x] = 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _renumber(labels, n, min_area, zero):
+    """`labels` (H, W) of `n` components renumbered 1.. in order over those of at least `min_area` pixels, the
+    rest 0, as `zero`'s dtype (numpy's bincount would first copy the labels to int64)."""
+    h, w = labels.shape
+    area = np.zeros(n, np.int64)
+    for y in range(h):  # counted by runs: neighbours mostly share a label, and `area[lab] += 1` per pixel stalls
+        run_label, run = labels[y, 0], 0
+        for x in range(w):
+            if labels[y, x] != run_label:
+                area[run_label] += run
+                run_label, run = labels[y, x], 0
+            run += 1
+        area[run_label] += run
+    keep = np.zeros(n, type(zero))
+    k = 0
+    for lab in range(1, n):
+        if area[lab] >= min_area:
+            k += 1
+            keep[lab] = k
+    out = np.empty((h, w), type(zero))
+    for y in range(h):
+        for x in range(w):
+            out[y, x] = keep[labels[y, x]]
+    return out
 
 
 def grow_by_depth(region: np.ndarray, depth: np.ndarray, grow_px: int, rel_tol: float = 0.15,

@@ -220,6 +220,55 @@ def test_segments_split_at_depth_jumps():
     assert len(np.unique(labels[20:80, 10:48])) == 1 and len(np.unique(labels[20:80, 52:90])) == 1
 
 
+def _plain_split(mask, depth, min_area, rel_jump=0.05):
+    """split_segments written plainly: components of the mask minus its depth edges, the small ones dropped,
+    then three rounds in which the mask's unlabelled pixels take the largest label within 2 px."""
+    from worker.slam.dynamic.segments import depth_edges
+    inner = mask & ~depth_edges(depth, rel_jump)
+    n, comp = cv2.connectedComponents(inner.astype(np.uint8), connectivity=4)
+    area = np.bincount(comp.ravel(), minlength=n)
+    keep = np.zeros(n, np.int32)
+    big = np.flatnonzero(area[1:] >= min_area) + 1
+    keep[big] = np.arange(1, len(big) + 1)
+    out = keep[comp]
+    h, w = mask.shape
+    for _ in range(3):
+        before = out.copy()
+        for y, x in zip(*np.nonzero(mask & (before == 0))):
+            out[y, x] = before[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3].max()
+    return out
+
+
+def test_segments_are_the_plain_rules_on_ragged_masks_with_holes_and_jumps():
+    """The compiled split (fused edge test, counting by runs, in-place refill) against the rules written
+    plainly, on random blobs over depth with holes, steps and ramps."""
+    rng = np.random.default_rng(7)
+    for t in range(60):
+        h, w = (int(v) for v in rng.integers(8, 90, 2))
+        # blocks of one depth (steps between them), holes, and on odd rounds ramps near the 5 % threshold
+        blocks = rng.choice([1.0, 1.5, 3.0], size=(h // 6 + 1, w // 6 + 1)).astype(np.float32)
+        depth = cv2.resize(blocks, (w, h), interpolation=cv2.INTER_NEAREST)
+        if t % 2:
+            depth = cv2.blur(depth, (9, 9))
+        depth[rng.random((h, w)) < 0.03] = 0.0
+        seeds = (rng.random((h, w)) < 0.02).astype(np.uint8)
+        mask = cv2.dilate(seeds, np.ones((9, 9), np.uint8)) > 0
+        # a threshold equal to one component's area: a miscount by one pixel changes the labels
+        from worker.slam.dynamic.segments import depth_edges
+        inner = (mask & ~depth_edges(depth, 0.05)).astype(np.uint8)
+        areas = np.bincount(cv2.connectedComponents(inner, connectivity=4)[1].ravel())[1:]
+        min_area = int(rng.choice(areas[areas > 1])) if (areas > 1).any() else 2
+        got = split_segments(mask, depth, min_area)
+        assert got.dtype == np.int32 and np.array_equal(got, _plain_split(mask, depth, min_area)), t
+
+
+def test_renumbering_keeps_more_labels_than_uint16_holds():
+    from worker.slam.dynamic.segments import _renumber
+    labels = np.arange(70_000, dtype=np.int32).reshape(1, -1)  # one pixel each: every one kept at min_area 1
+    out = _renumber(labels, 70_000, 1, np.float32(0))
+    assert out.dtype == np.float32 and out[0, 0] == 0 and out[0, -1] == 69_999
+
+
 def test_depth_edges_are_the_relative_jumps_between_4_neighbours_and_the_holes():
     from worker.slam.dynamic.segments import depth_edges
 
