@@ -26,25 +26,29 @@ Window = Callable[[slice, slice], tuple[np.ndarray, np.ndarray]]
 """(rows, cols) of the image -> its values there (h, w, C) and which of them are known (h, w) bool."""
 
 
-def fill_depth_from_border(depth: np.ndarray, fill: np.ndarray) -> np.ndarray:
+def fill_depth_from_border(depth: np.ndarray, fill: np.ndarray,
+                           pixels: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Depth (N,) float32 m for the N pixels of `fill` (H, W) bool, row-major, from `depth` (H, W) float32 m
-    (0 = unknown; pixels of `fill` are ignored). 0 where no known depth is connected to continue from."""
+    (0 = unknown; pixels of `fill` are ignored). 0 where no known depth is connected to continue from.
+    `pixels`: `np.nonzero(fill)` when the caller has it (see `harmonic_fill`)."""
     def inverse_depth(rows: slice, cols: slice) -> tuple[np.ndarray, np.ndarray]:
         d = depth[rows, cols]
         known = d > 0
         return np.where(known, 1.0 / np.where(known, d, 1.0), 0.0)[..., None], known
 
-    q = harmonic_fill(fill, inverse_depth)[:, 0]
+    q = harmonic_fill(fill, inverse_depth, pixels)[:, 0]
     return np.where(q > 1e-6, 1.0 / np.maximum(q, 1e-6), 0.0).astype(np.float32)
 
 
-def harmonic_fill(fill: np.ndarray, window: Window) -> np.ndarray:
+def harmonic_fill(fill: np.ndarray, window: Window,
+                  pixels: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(N, C) float64 for the N pixels of `fill` (H, W) bool, row-major: the harmonic interpolant of the image
     `window` reads (only around `fill`, so per-pixel work stays there) from its known pixels outside `fill`,
     all channels in one solve. 0 where no known pixel is connected (on the coarse grid: also next to a coarse
-    pixel nothing reached)."""
+    pixel nothing reached). `pixels` (rows, cols): `np.nonzero(fill)` when the caller already has it (a
+    full-image pass, 0.5 ms on VGA)."""
     h, w = fill.shape
-    fy, fx = np.nonzero(fill)
+    fy, fx = np.nonzero(fill) if pixels is None else pixels
     scale = 1
     while len(fy) / scale**2 > _MAX_UNKNOWNS:
         scale *= 2

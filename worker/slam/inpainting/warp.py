@@ -11,7 +11,7 @@ def relative_pose(T_WC_ref: np.ndarray, T_WC_tgt: np.ndarray) -> np.ndarray:
     return np.linalg.inv(T_WC_tgt) @ T_WC_ref
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _splat(depth, valid, R, t, fx, fy, cx, cy, y0, y1, x0, x1, out, zbuf):
     h, w = depth.shape
     for y in range(h):
