@@ -26,7 +26,7 @@ from worker.slam.dynamic.epipolar import (
     predict_positions,
 )
 from worker.slam.dynamic.object_motion import ObjectMotionConfig, estimate_object_motion
-from worker.slam.dynamic.segments import grow_by_depth, split_segments
+from worker.slam.dynamic.segments import grow_by_depth, pixels_of, split_segments
 from worker.slam.dynamic.sorted_stats import median_of_sorted, quantile_of_sorted
 from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy, object_threshold
 from worker.slam.features.depth import backproject
@@ -423,7 +423,7 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
             labels[grown & (labels == 0)] = grow_lab
         point_label = labels[yi, xi]
     # one pass over the image for all segments (none when nothing moves)
-    dynamic = np.take(moving_label, labels) if moving_label.any() else np.zeros((h, w), bool)  # = moving_label[labels]
+    dynamic = pixels_of(labels, moving_label) if moving_label.any() else np.zeros((h, w), bool)
     if config.local_px > 0 and n_labels:
         dynamic = _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr_label, config)
     exclude = dilate_disc(dynamic, config.dilation_px)

@@ -120,6 +120,18 @@ def _renumber(labels, n, min_area, zero):
     return out
 
 
+@njit(cache=True, nogil=True)
+def pixels_of(labels: np.ndarray, chosen: np.ndarray) -> np.ndarray:
+    """bool (H, W): the pixels of the segments `labels` (H, W) whose entry in `chosen` (L+1,) bool is True, in
+    one compiled pass (numpy's `take` first copies int32 labels to int64: 0.3 ms per VGA frame)."""
+    h, w = labels.shape
+    out = np.empty((h, w), np.bool_)
+    for y in range(h):
+        for x in range(w):
+            out[y, x] = chosen[labels[y, x]]
+    return out
+
+
 def grow_by_depth(region: np.ndarray, depth: np.ndarray, grow_px: int, rel_tol: float = 0.15,
                   rel_jump: float = 0.05) -> np.ndarray:
     """bool (H, W): `region` (one object) extended into the pixels that continue its surface: within `grow_px`

@@ -295,6 +295,13 @@ def test_segments_are_the_plain_rules_on_ragged_masks_with_holes_and_jumps():
         assert got.dtype == np.int32 and np.array_equal(got, _plain_split(mask, depth, min_area)), t
 
 
+def test_pixels_of_chosen_segments_are_numpys_lookup():
+    from worker.slam.dynamic.segments import pixels_of
+    labels = np.random.default_rng(1).integers(0, 7, (31, 45)).astype(np.int32)
+    chosen = np.array([False, True, False, True, True, False, True])
+    assert np.array_equal(pixels_of(labels, chosen), chosen[labels])
+
+
 def test_renumbering_keeps_more_labels_than_uint16_holds():
     from worker.slam.dynamic.segments import _renumber
     labels = np.arange(70_000, dtype=np.int32).reshape(1, -1)  # one pixel each: every one kept at min_area 1
