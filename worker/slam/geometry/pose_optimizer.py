@@ -50,6 +50,7 @@ def optimize_pose(T_WC: np.ndarray, X_w: np.ndarray, uv: np.ndarray, z: np.ndarr
     obs, has = rp.observations(uv, z, bf)
     roww = rp.residual_weights(has)
     thr = np.where(has, CHI2_STEREO, CHI2_MONO)
+    prior = np.ones(n) if weights is None else np.asarray(weights, np.float64)
     inl = np.ones(n, bool)
     chi2 = np.zeros(n)
     for rnd in range(rounds):
@@ -59,16 +60,10 @@ def optimize_pose(T_WC: np.ndarray, X_w: np.ndarray, uv: np.ndarray, z: np.ndarr
             good = inl & (Pc[:, 2] > 1e-3)
             if good.sum() < 3:
                 break
-            e = (obs - rp.project(np.where(Pc[:, 2:3] > 1e-3, Pc, 1.0), K, bf)) * roww
-            chi2 = info * (e**2).sum(1)
-            w = info * (rp.huber_weights(chi2, huber_px) if robust else 1.0)
-            if weights is not None:
-                w = w * weights
-            w = np.where(good, w, 0.0)
-            J = rp.jacobian_pose(Pc, rp.jacobian_point(Pc, K, bf)) * roww[:, :, None]
-            Jf = J.reshape(-1, 6)
-            Jw = (J * w[:, None, None]).reshape(-1, 6)
-            H = Jw.T @ Jf
+            e, J, Jw = rp.pose_step_terms(Pc, obs, roww, info, good, prior, K[0, 0], K[1, 1], K[0, 2], K[1, 2],
+                                          float(bf), float(huber_px), robust)
+            Jw = Jw.reshape(-1, 6)
+            H = Jw.T @ J.reshape(-1, 6)
             b = Jw.T @ e.ravel()
             try:
                 delta = np.linalg.solve(H, b)
