@@ -42,7 +42,7 @@ class OrbExtractor:
         kps, desc = self._orb.compute(gray, kps)
         if desc is None or not kps:
             return Features.empty()
-        uv = cv2.KeyPoint_convert(kps).astype(np.float64)  # the same values, without a Python loop
+        uv = cv2.KeyPoint_convert(kps).astype(np.float64)  # type: ignore[attr-defined]  # (absent from the stubs)
         octave = np.array([k.octave for k in kps], dtype=int)
         resp = np.array([k.response for k in kps], dtype=np.float32)
         z = (lookup_depth(uv, depth, self.cfg.min_depth_m, self.cfg.max_depth_m,
@@ -56,7 +56,7 @@ class OrbExtractor:
             return list(kps)
         h, w = shape
         cell = self.cfg.grid_cell_px
-        pts = cv2.KeyPoint_convert(kps).astype(np.float64)
+        pts = cv2.KeyPoint_convert(kps).astype(np.float64)  # type: ignore[attr-defined]  # (absent from the stubs)
         resp = np.array([k.response for k in kps])
         gx, gy = int(np.ceil(w / cell)), int(np.ceil(h / cell))
         cid = np.minimum(pts[:, 1] // cell, gy - 1).astype(int) * gx + np.minimum(pts[:, 0] // cell, gx - 1).astype(int)
