@@ -62,6 +62,38 @@ def test_local_ba_pulls_perturbed_keyframes_back(mapped):
     m.points.pos[:] = saved_pts
 
 
+def test_local_ba_blocks_are_the_numpy_expressions_bit_for_bit():
+    """The compiled normal-equation blocks against the einsum / add.at expressions they replace (points behind a
+    camera, observations without depth, fixed cameras, points seen many times): equal bits."""
+    from scipy.spatial.transform import Rotation
+
+    from worker.slam.geometry import reprojection as rp
+    from worker.slam.mapping.local_ba import _normal_blocks
+    rng = np.random.default_rng(4)
+    n, n_var, ncam, P, bf = 3000, 6, 9, 700, 40.0
+    T_CW = np.tile(np.eye(4), (ncam, 1, 1))
+    T_CW[:, :3, :3] = Rotation.random(ncam, random_state=2).as_matrix()
+    c, p = rng.integers(0, ncam, n), rng.integers(0, P, n)
+    Pc = np.column_stack([rng.normal(0, 1, n), rng.normal(0, 1, n), rng.uniform(0.3, 5, n)])
+    Pc[:15, 2] = -0.5
+    front = Pc[:, 2] > 1e-3
+    e, roww = rng.normal(0, 2, (n, 3)), np.ones((n, 3))
+    roww[rng.random(n) < 0.2, 2] = 0.0
+    w = rng.uniform(0, 2, n) * front
+    Jp = rp.jacobian_point(np.where(front[:, None], Pc, 1.0), K_SYN, bf) * roww[:, :, None]
+    JX = Jp @ T_CW[c, :3, :3]
+    var = c < n_var
+    Jc = rp.jacobian_pose(Pc[var], Jp[var])
+    want = [np.zeros((n_var, 6, 6)), np.zeros((n_var, 6)), np.zeros((P, 3, 3)), np.zeros((P, 3))]
+    np.add.at(want[0], c[var], np.einsum("nik,n,nil->nkl", Jc, w[var], Jc))
+    np.add.at(want[1], c[var], np.einsum("nik,n,ni->nk", Jc, w[var], e[var]))
+    np.add.at(want[2], p, np.einsum("nik,n,nil->nkl", JX, w, JX))
+    np.add.at(want[3], p, np.einsum("nik,n,ni->nk", JX, w, e))
+    want.append(np.einsum("nik,n,nil->nkl", Jc, w[var], JX[var]))
+    for got, ref in zip(_normal_blocks(Pc, Jp, JX, w, e, c, p, n_var, P), want):
+        assert got.shape == ref.shape and np.array_equal(got, ref)
+
+
 def test_culling_removes_unconfirmed_recent_points():
     m = Map()
     p = m.points
