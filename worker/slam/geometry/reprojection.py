@@ -81,6 +81,7 @@ def pose_step_terms(Pc, obs, roww, info, good, prior, fx, fy, cx, cy, bf, huber_
     e = np.empty((n, 3))
     J = np.empty((n, 3, 6))
     Jw = np.empty((n, 3, 6))
+    jp, jc = np.zeros((3, 3)), np.zeros((3, 6))
     for i in range(n):
         x, y, z = Pc[i, 0], Pc[i, 1], Pc[i, 2]
         # the residual at the point, or at (1, 1, 1) behind the camera (its weight is 0)
@@ -97,19 +98,34 @@ def pose_step_terms(Pc, obs, roww, info, good, prior, fx, fy, cx, cy, bf, huber_
             r = np.sqrt(max(chi2, 1e-12))
             w = w * (1.0 if r <= huber_px else huber_px / r)
         w = w * prior[i] if good[i] else 0.0
-        iz, iz2 = 1.0 / z, 1.0 / z**2
-        # d(u, v, u_r)/dPc (`jacobian_point`), then [I, -hat(Pc)] (`jacobian_pose`), rows times `roww`
-        jp = np.zeros((3, 3))
-        jp[0, 0] = fx * iz
-        jp[0, 2] = -fx * x * iz2
-        jp[1, 1] = fy * iz
-        jp[1, 2] = -fy * y * iz2
-        jp[2, 0] = fx * iz
-        jp[2, 2] = (-fx * x + bf) * iz2
+        point_jacobian_rows(x, y, z, fx, fy, bf, jp)
+        pose_jacobian_rows(x, y, z, jp, jc)
         for r in range(3):
-            r0, r1, r2 = jp[r, 0], jp[r, 1], jp[r, 2]
-            row = (r0, r1, r2, y * r2 - z * r1, z * r0 - x * r2, x * r1 - y * r0)
             for c in range(6):
-                J[i, r, c] = row[c] * roww[i, r]
+                J[i, r, c] = jc[r, c] * roww[i, r]
                 Jw[i, r, c] = J[i, r, c] * w
     return e, J, Jw
+
+
+@njit(cache=True, nogil=True)
+def point_jacobian_rows(x, y, z, fx, fy, bf, out):
+    """`jacobian_point` of one camera-frame point (x, y, z) into `out` (3,3), the same operations in the same order
+    (for the compiled BA kernels)."""
+    iz, iz2 = 1.0 / z, 1.0 / z**2
+    out[:] = 0.0
+    out[0, 0] = fx * iz
+    out[0, 2] = -fx * x * iz2
+    out[1, 1] = fy * iz
+    out[1, 2] = -fy * y * iz2
+    out[2, 0] = fx * iz
+    out[2, 2] = (-fx * x + bf) * iz2
+
+
+@njit(cache=True, nogil=True)
+def pose_jacobian_rows(x, y, z, jp, out):
+    """`jacobian_pose` of one camera-frame point (x, y, z) with d/dPc `jp` (3,3) into `out` (3,6): [jp, Pc x row],
+    the same operations in the same order (for the compiled BA kernels)."""
+    for r in range(3):
+        r0, r1, r2 = jp[r, 0], jp[r, 1], jp[r, 2]
+        out[r, 0], out[r, 1], out[r, 2] = r0, r1, r2
+        out[r, 3], out[r, 4], out[r, 5] = y * r2 - z * r1, z * r0 - x * r2, x * r1 - y * r0

@@ -183,11 +183,7 @@ def _normal_blocks(Pc, Jp, JX, w, e, c, p, n_var, P):
         ci = c[i]
         if ci >= n_var:
             continue
-        x, y, z = Pc[i, 0], Pc[i, 1], Pc[i, 2]
-        for r in range(3):
-            r0, r1, r2 = Jp[i, r, 0], Jp[i, r, 1], Jp[i, r, 2]
-            jc[r, 0], jc[r, 1], jc[r, 2] = r0, r1, r2
-            jc[r, 3], jc[r, 4], jc[r, 5] = y * r2 - z * r1, z * r0 - x * r2, x * r1 - y * r0
+        rp.pose_jacobian_rows(Pc[i, 0], Pc[i, 1], Pc[i, 2], Jp[i], jc)
         for k in range(6):
             for m in range(6):
                 acc = 0.0
