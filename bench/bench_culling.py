@@ -11,9 +11,7 @@ time; not the process's CPU time, which OpenCV's spinning worker threads inflate
 
 `--pipeline PRESET` times `cull_frame` inside a whole run of that preset instead (any sequence, e.g. the real
 ../shared/data/bonn_crowd_dev): the preset's segmenter and the tracker's own predictions, every stage on one
-thread (no read-ahead) so nothing else runs while it is timed. There the objects come split by the segmentation
-stage (since 882c834; 1.9 ms per Bonn frame), so the figures no longer contain the split; without `--pipeline`
-`cull_frame` splits the truth masks itself. Benchmarks print figures; they assert nothing.
+thread (no read-ahead) so nothing else runs while it is timed. Benchmarks print figures; they assert nothing.
 """
 from __future__ import annotations
 

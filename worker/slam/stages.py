@@ -46,9 +46,6 @@ class FrameInputs:
     instead of extracting its own."""
     potentially_dynamic: np.ndarray | None = None
     """bool (H,W): pixels of potentially dynamic classes (segmentation)."""
-    segments: np.ndarray | None = None
-    """int32 (H,W): `potentially_dynamic` split into objects at depth jumps, 0 outside (segmentation computes it
-    with the mask, ahead of the frame's turn, for culling to judge; None = culling splits it itself)."""
     dynamic_mask: np.ndarray | None = None
     """bool (H,W): pixels judged moving (culling)."""
     held_back: Features | None = None

@@ -352,27 +352,20 @@ def _geometric_clusters(p_cur, moving, depth, covered, config) -> list[np.ndarra
 def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, desc_cur: np.ndarray,
                depth_cur: np.ndarray, potentially_dynamic: np.ndarray | None, pose_cov: np.ndarray | None,
                config: CullingConfig = CullingConfig(), prev_depth: np.ndarray | None = None,
-               K: np.ndarray | None = None, T_cur_prev: np.ndarray | None = None, *,
-               segments: np.ndarray | None = None) -> CullingResult:
+               K: np.ndarray | None = None, T_cur_prev: np.ndarray | None = None) -> CullingResult:
     """Judge the objects of the current frame.
 
     `kp_*` (N, 2) pixel coordinates (x, y) with ORB `desc_*` (N, 32) uint8; `depth_cur` float32 m (H, W);
     `potentially_dynamic` bool (H, W) from segmentation (None in geometry-only mode); `pose_cov` the 6x6
     covariance of the previous pose estimate (for Δd); `prev_depth` + `K` enable the reprojection test;
-    `T_cur_prev` (4x4, X_cur = T X_prev), the predicted relative pose, enables guided matching. `segments`
-    int32 (H, W): `potentially_dynamic` already split into objects (`split_segments` with this config's
-    `min_segment_area` and `depth_jump`, e.g. ahead on the segmentation thread); None = split here.
+    `T_cur_prev` (4x4, X_cur = T X_prev), the predicted relative pose, enables guided matching.
     """
     h, w = depth_cur.shape
     entropy = motion_entropy(pose_cov)
     thr = adaptive_threshold(entropy, config.threshold)
     use_sem = config.use_segmentation and potentially_dynamic is not None
-    if not use_sem or potentially_dynamic is None:
-        labels = np.zeros((h, w), np.int32)
-    elif segments is not None:
-        labels = segments
-    else:
-        labels = split_segments(potentially_dynamic, depth_cur, config.min_segment_area, config.depth_jump)
+    labels = split_segments(potentially_dynamic, depth_cur, config.min_segment_area, config.depth_jump) \
+        if use_sem and potentially_dynamic is not None else np.zeros((h, w), np.int32)
     # Keypoints on objects are matched exhaustively (a search radius would keep only their small motions and
     # bias the decision towards "static"); the static rest, when a pose is predicted, by the guided search.
     on_object = labels[_pixel(kp_cur[:, 1], h), _pixel(kp_cur[:, 0], w)] > 0 if use_sem else None

@@ -16,7 +16,6 @@ import numpy as np
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig, valid
 from worker.slam.dynamic.culling import CullingConfig, CullingResult, cull_frame, dilate_disc, mask_at
-from worker.slam.dynamic.segments import split_segments
 from worker.slam.errors import SequenceFormatError
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.types import Features
@@ -68,50 +67,30 @@ class _PastFrame:
     T_WC: np.ndarray | None = None
 
 
-@dataclass(frozen=True)
-class Segmented:
-    """One frame's segmentation: the potentially dynamic pixels, bool (H,W), and (when culling runs) those pixels
-    split into objects at depth jumps, int32 (H,W) labels (`segments.split_segments`)."""
-
-    mask: np.ndarray
-    segments: np.ndarray | None
-
-
 class SegmentationStage:
     name = "segmentation"
 
     def __init__(self, config: PipelineConfig, camera: Camera) -> None:
         cfg: SegmentationStageConfig = config.section("segmentation")
         self.segmenter = make_segmenter(cfg.segmenter) if cfg.source == "network" else None
-        # The objects culling judges are split here, with the mask and by culling's settings: from the frame
-        # alone, so ahead of its turn, off the pipeline thread (1.9 ms of culling's 8 on Bonn frames).
-        self.split: CullingConfig | None = \
-            config.section("culling").culling if "culling" in config.stages else None
 
-    def prepare(self, frame: Frame) -> Segmented | None:
-        """The network's potentially dynamic pixels and their objects: from the frame alone, so the pipeline may
-        run it ahead on another thread. None for the truth source (read in `process`: it needs the run's truth)."""
-        if self.segmenter is None:
-            return None
-        return self._objects(frame, self.segmenter.segment(frame.rgb).dynamic_mask())
-
-    def _objects(self, frame: Frame, mask: np.ndarray) -> Segmented:
-        if self.split is None:
-            return Segmented(mask, None)
-        return Segmented(mask, split_segments(mask, frame.depth, self.split.min_segment_area, self.split.depth_jump))
+    def prepare(self, frame: Frame) -> np.ndarray | None:
+        """The network's potentially dynamic pixels, bool (H,W): from the RGB alone, so the pipeline may run it
+        ahead on another thread. None for the truth source (read in `process`: it needs the run's truth)."""
+        return None if self.segmenter is None else self.segmenter.segment(frame.rgb).dynamic_mask()
 
     def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
-        got = inputs.prepared.get(self.name)
+        mask = inputs.prepared.get(self.name)
         if self.segmenter is None:
             if ctx.truth is None:
                 raise SequenceFormatError("segmentation.source 'truth' needs a sequence with truth/ masks",
                                           path=ctx.sequence.root if ctx.sequence is not None else None)
-            got = self._objects(frame, ctx.truth.mask(frame.index))
-        elif got is None:
-            got = self.prepare(frame)
-        assert isinstance(got, Segmented)
-        inputs.potentially_dynamic, inputs.segments = got.mask, got.segments
-        inputs.info["potentially_dynamic_fraction"] = float(got.mask.mean())
+            mask = ctx.truth.mask(frame.index)
+        elif mask is None:
+            mask = self.prepare(frame)
+        assert isinstance(mask, np.ndarray)
+        inputs.potentially_dynamic = mask
+        inputs.info["potentially_dynamic_fraction"] = float(mask.mean())
         return inputs
 
 
@@ -164,8 +143,7 @@ class CullingStage:
             t0 = time.perf_counter()
             res = cull_frame(prev_feats.uv, prev_feats.desc, feats.uv, feats.desc, frame.depth,
                              inputs.potentially_dynamic if self.use_segmentation else None, cov, cfg,
-                             prev_depth, self.camera.K, T_cur_prev,
-                             segments=inputs.segments if self.use_segmentation else None)
+                             prev_depth, self.camera.K, T_cur_prev)
             self.decision_ms.append(1000 * (time.perf_counter() - t0))
             removed = res.removed(feats.uv)
             removed = self._readmit(removed, feats.uv, res.dynamic_mask, inputs.info)

@@ -220,39 +220,6 @@ def test_segments_split_at_depth_jumps():
     assert len(np.unique(labels[20:80, 10:48])) == 1 and len(np.unique(labels[20:80, 52:90])) == 1
 
 
-def test_culling_judges_the_objects_it_is_given():
-    """Objects split ahead (segmentation does it on its thread) give the same result as splitting here, and
-    they are what is judged: given no objects, nothing semantic is judged."""
-    (rgb0, d0, _), (rgb1, d1, m1) = two_frames(0.05)
-    (kp0, ds0), (kp1, ds1) = orb(rgb0), orb(rgb1)
-    cfg = CullingConfig()
-    ahead = split_segments(m1, d1, cfg.min_segment_area, cfg.depth_jump)
-    here = cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, cfg, d0, K)
-    given = cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, cfg, d0, K, segments=ahead)
-    assert any(s.dynamic for s in here.segments)
-    assert np.array_equal(given.exclude_mask, here.exclude_mask) and given.segments == here.segments
-    none = cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, cfg, d0, K, segments=np.zeros_like(ahead))
-    assert not none.segments and not none.dynamic_mask.any()
-
-
-def test_segmentation_splits_its_mask_into_culling_objects_ahead(tmp_path):
-    from worker.slam.camera import PRESETS
-    from worker.slam.dynamic.stage import SegmentationStage
-    from worker.slam.io.sequence import Sequence
-    from worker.slam.presets import get_preset
-    from worker.slam.synth.generator import SynthConfig, generate_synthetic
-
-    generate_synthetic(tmp_path, SynthConfig(frames=3, people=2, seed=2))
-    frame = Sequence(tmp_path, PRESETS["tum3"])[2]
-    cfg = get_preset("no-restoration", {"culling.culling.min_segment_area": 50, "culling.culling.depth_jump": 0.1})
-    got = SegmentationStage(cfg, PRESETS["tum3"]).prepare(frame)
-    assert got is not None and got.mask.any() and got.segments is not None
-    assert np.array_equal(got.segments, split_segments(got.mask, frame.depth, 50, 0.1))
-    alone = SegmentationStage(get_preset("no-restoration", {"stages": ["segmentation"]}), PRESETS["tum3"])
-    lone = alone.prepare(frame)
-    assert lone is not None and lone.segments is None  # no culling: nothing to split
-
-
 def _plain_split(mask, depth, min_area, rel_jump=0.05):
     """split_segments written plainly: components of the mask minus its depth edges, the small ones dropped,
     then three rounds in which the mask's unlabelled pixels take the largest label within 2 px."""
