@@ -69,21 +69,35 @@ def popcount64(typingctx, x):
 
 @njit(cache=True, nogil=True)
 def _cross_checked(a, b, max_distance):
+    # Row by row: the distances of a[i] to every b[j] first (b's words transposed so each pass streams one
+    # word of all b: the loops vectorise), then the row's first minimum and the columns' running minima
+    # (strict: the first of equal distances wins both ways, as in OpenCV). int32 lanes: twice the width.
     n, m, words = a.shape[0], b.shape[0], a.shape[1]
     row_best = np.empty(n, np.int64)
     row_dist = np.empty(n, np.int64)
-    col_best = np.zeros(m, np.int64)
-    col_dist = np.full(m, 1 << 30, np.int64)
+    col_best = np.zeros(m, np.int32)
+    col_dist = np.full(m, 1 << 30, np.int32)
+    bt = np.ascontiguousarray(b.T)
+    d = np.empty(m, np.int32)
     for i in range(n):
-        best, best_d = -1, 1 << 30
+        a0 = a[i, 0]
         for j in range(m):
-            d = 0
-            for k in range(words):
-                d += popcount64(a[i, k] ^ b[j, k])
-            if d < best_d:  # strict: the first of equal distances wins, as in OpenCV
-                best, best_d = j, d
-            if d < col_dist[j]:
-                col_dist[j], col_best[j] = d, i
+            d[j] = np.int32(popcount64(a0 ^ bt[0, j]))
+        for k in range(1, words):
+            ak = a[i, k]
+            for j in range(m):
+                d[j] += np.int32(popcount64(ak ^ bt[k, j]))
+        best_d = np.int32(1 << 30)
+        for j in range(m):
+            best_d = min(best_d, d[j])
+        best = 0
+        while d[best] != best_d:
+            best += 1
+        row_i = np.int32(i)
+        for j in range(m):
+            better = d[j] < col_dist[j]
+            col_dist[j] = d[j] if better else col_dist[j]
+            col_best[j] = row_i if better else col_best[j]
         row_best[i], row_dist[i] = best, best_d
     keep = np.zeros(n, np.bool_)
     for i in range(n):
