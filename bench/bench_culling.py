@@ -1,7 +1,8 @@
 """Culling cost per frame on real images: `cull_frame` alone, guided vs brute-force matching.
 
     .venv/bin/python bench/bench_culling.py SEQ_DIR [--camera 7scenes] [--frames 60] [--lag 10]
-    .venv/bin/python bench/bench_culling.py SEQ_DIR --camera bonn --pipeline no-restoration
+    .venv/bin/python bench/bench_culling.py SEQ_DIR --camera bonn --pipeline no-restoration [--record CALLS]
+    .venv/bin/python bench/bench_culling.py --replay CALLS [--passes 3]
 
 SEQ_DIR is a sequence with truth (`vtdslam augment` / `vtdslam synth` output): its truth masks stand in for the
 segmentation and its ground-truth poses, perturbed by 5 mm and 0.3° like a motion-model prediction, give the
@@ -11,14 +12,21 @@ time; not the process's CPU time, which OpenCV's spinning worker threads inflate
 
 `--pipeline PRESET` times `cull_frame` inside a whole run of that preset instead (any sequence, e.g. the real
 ../shared/data/bonn_crowd_dev): the preset's segmenter and the tracker's own predictions, every stage on one
-thread (no read-ahead) so nothing else runs while it is timed. Benchmarks print figures; they assert nothing.
+thread (no read-ahead) so nothing else runs while it is timed. `--record CALLS` also saves every call's inputs
+and result (a pickle of this tool's own making: ~2 MB per VGA frame); `--replay CALLS` times `cull_frame` on them
+again (the calling thread's CPU time, best of `--passes` passes) and counts the results that differ from the
+recorded ones: run it from two checkouts in turn to compare code on the same inputs, outputs included, with
+none of the run's other threads or the tracker in the figure. Benchmarks print figures; they assert nothing.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import pickle
 import sys
 import time
 from pathlib import Path
+from unittest import mock
 
 import cv2
 import numpy as np
@@ -29,7 +37,8 @@ sys.path.insert(0, str(ROOT))
 
 from worker.slam.camera import parse_camera  # noqa: E402
 from worker.slam.config import PipelineConfig  # noqa: E402
-from worker.slam.dynamic.culling import CullingConfig, cull_frame  # noqa: E402
+from worker.slam.dynamic import stage as culling_stage  # noqa: E402
+from worker.slam.dynamic.culling import CullingConfig, CullingResult, cull_frame  # noqa: E402
 from worker.slam.dynamic.stage import CullingStage  # noqa: E402
 from worker.slam.features.orb import OrbExtractor  # noqa: E402
 from worker.slam.geometry.se3 import inv  # noqa: E402
@@ -42,14 +51,24 @@ from worker.slam.truth import load_truth  # noqa: E402
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("sequence", type=Path)
+    ap.add_argument("sequence", type=Path, nargs="?")
     ap.add_argument("--camera", default="7scenes")
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--lag", type=int, default=10)
     ap.add_argument("--pipeline", metavar="PRESET", help="time culling inside a run of this pipeline preset")
+    ap.add_argument("--record", type=Path, metavar="CALLS", help="with --pipeline: save every call to this file")
+    ap.add_argument("--replay", type=Path, metavar="CALLS", help="time the calls saved by --record")
+    ap.add_argument("--passes", type=int, default=3, help="passes over the saved calls (--replay)")
     args = ap.parse_args()
+    if args.replay:
+        _replay(args.replay, args.passes)
+        return
+    if args.sequence is None:
+        ap.error("give SEQ_DIR (or --replay CALLS)")
+    if args.record and not args.pipeline:
+        ap.error("--record needs --pipeline PRESET")
     if args.pipeline:
-        _in_pipeline(args.sequence, args.camera, args.pipeline)
+        _in_pipeline(args.sequence, args.camera, args.pipeline, args.record)
         return
     seq, truth = Sequence(args.sequence, parse_camera(args.camera)), load_truth(args.sequence)
     if truth is None:
@@ -84,11 +103,20 @@ def main() -> None:
               f"{np.percentile(ts, 90):.1f} | {np.median(cpu):.1f} |", flush=True)
 
 
-def _in_pipeline(root: Path, camera: str, preset: str) -> None:
-    """`cull_frame`'s wall time per frame in a run of `preset` on `root`, all stages on this thread."""
+def _in_pipeline(root: Path, camera: str, preset: str, record: Path | None = None) -> None:
+    """`cull_frame`'s wall time per frame in a run of `preset` on `root`, all stages on this thread; with
+    `record`, every call's arguments and result saved there."""
     seq, config = Sequence(root, parse_camera(camera)), get_preset(preset)
     stages = build_stages(config, seq.camera)
-    res = run_pipeline(seq, config, None, stages=stages, read_ahead=0)
+    calls: list[tuple[tuple, dict, CullingResult]] = []
+
+    def recorded(*a, **k) -> CullingResult:
+        res = cull_frame(*a, **k)
+        calls.append((a, k, res))
+        return res
+
+    with mock.patch.object(culling_stage, "cull_frame", recorded) if record else contextlib.nullcontext():
+        res = run_pipeline(seq, config, None, stages=stages, read_ahead=0)
     culling = next(s for s in stages if isinstance(s, CullingStage))
     ms = np.array(culling.decision_ms)
     print(f"| {root.name}, `{preset}`, one thread | frames culled | guided | cull_frame ms median | p90 | mean | "
@@ -97,6 +125,41 @@ def _in_pipeline(root: Path, camera: str, preset: str) -> None:
     ate = res.metrics.get("ate", {}).get("rmse")
     print(f"| | {len(ms)} | {culling.guided} | {np.median(ms):.1f} | {np.percentile(ms, 90):.1f} | "
           f"{ms.mean():.1f} | {ate if ate is None else round(ate, 4)} | {res.metrics['lost']} |")
+    if record:
+        with open(record, "wb") as f:
+            pickle.dump(calls, f, protocol=pickle.HIGHEST_PROTOCOL)
+        print(f"{len(calls)} calls saved to {record}")
+
+
+def _replay(path: Path, passes: int) -> None:
+    """Thread CPU ms of `cull_frame` on the calls saved by `--record`, and how many results differ."""
+    with open(path, "rb") as f:
+        calls = pickle.load(f)  # this tool's own file (see the module docstring)
+    for a, k, _ in calls[:20]:  # compiled kernels and caches warm
+        cull_frame(*a, **k)
+    best: np.ndarray | None = None
+    differ = 0
+    for p in range(passes):
+        ms = []
+        for a, k, want in calls:
+            c0 = time.thread_time()
+            got = cull_frame(*a, **k)
+            ms.append(1000 * (time.thread_time() - c0))
+            differ += p == 0 and not _same(got, want)
+        if best is None or np.median(ms) < np.median(best):
+            best = np.array(ms)
+    assert best is not None
+    print(f"| {path.name} | calls | thread CPU ms median | p90 | mean | results unlike the recorded ones |")
+    print("|---|---|---|---|---|---|")
+    print(f"| best of {passes} passes | {len(calls)} | {np.median(best):.2f} | {np.percentile(best, 90):.2f} | "
+          f"{best.mean():.2f} | {differ} |")
+
+
+def _same(a: CullingResult, b: CullingResult) -> bool:
+    return (np.array_equal(a.dynamic_mask, b.dynamic_mask) and np.array_equal(a.exclude_mask, b.exclude_mask)
+            and np.array_equal(a.scores, b.scores) and np.array_equal(a.cur_points, b.cur_points)
+            and a.segments == b.segments and a.threshold_px == b.threshold_px and a.matches == b.matches
+            and a.guided == b.guided)
 
 
 if __name__ == "__main__":
