@@ -61,6 +61,8 @@ def main() -> None:
     ap.add_argument("--passes", type=int, default=3, help="passes over the saved calls (--replay)")
     args = ap.parse_args()
     if args.replay:
+        if args.passes < 1 or not args.replay.is_file():
+            ap.error(f"--replay needs an existing file and --passes >= 1 ({args.replay}, {args.passes})")
         _replay(args.replay, args.passes)
         return
     if args.sequence is None:
@@ -111,9 +113,9 @@ def _in_pipeline(root: Path, camera: str, preset: str, record: Path | None = Non
     calls: list[tuple[tuple, dict, CullingResult]] = []
 
     def recorded(*a, **k) -> CullingResult:
-        res = cull_frame(*a, **k)
-        calls.append((a, k, res))
-        return res
+        out = cull_frame(*a, **k)
+        calls.append((a, k, out))
+        return out
 
     with mock.patch.object(culling_stage, "cull_frame", recorded) if record else contextlib.nullcontext():
         res = run_pipeline(seq, config, None, stages=stages, read_ahead=0)
