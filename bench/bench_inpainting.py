@@ -2,13 +2,15 @@
 PatchMatch) against OpenCV's Telea on the whole hole.
 
 For frames of a dynamic sequence with truth (`vtdslam synth` / `vtdslam augment` output), the true dynamic mask
-is the hole; references are chosen causally (past 15 frames) or both-sided (+-15 frames) with ground-truth poses
-and true masks, so the figures isolate the restoration from tracking and segmentation errors. Prints RGB PSNR
+is the hole; references are chosen causally (past 15 frames) or both-sided (+-15 frames), plus the second-chance
+references from up to 30 frames away (`--far-refs`, default as the pipeline's), with ground-truth poses and true
+masks, so the figures isolate the restoration from tracking and segmentation errors. Prints RGB PSNR
 (whole hole, and split into pixels a reference sees / does not see) and depth error and coverage inside the
 holes, hole size and time/frame.
 
     .venv/bin/python bench/bench_inpainting.py SEQ_DIR [SEQ_DIR ...] [--frames 30] [--camera tum3] [--speed]
-        [--references causal,both-sided] [--unseen-fill harmonic,telea,patchmatch] [--unseen-depth border|none]
+        [--references causal,both-sided] [--far-refs 2[,0]] [--unseen-fill harmonic,telea,patchmatch]
+        [--unseen-depth border|none]
         [--static REAL_SEQ:CAMERA [--static-every 100] [--static-max-frames N]]
 
 `--static` uses real static frames as their own truth: artificial person-sized holes, no references, so the
@@ -31,7 +33,8 @@ from worker.slam.io.sequence import Sequence
 from worker.slam.truth import load_truth, restoration_psnr
 
 
-def bench_sequence(root: Path, camera: str, n_frames: int, both_sided: bool, config: RestorationConfig) -> dict:
+def bench_sequence(root: Path, camera: str, n_frames: int, both_sided: bool, config: RestorationConfig,
+                   sel_cfg: ReferenceSelectionConfig = ReferenceSelectionConfig()) -> dict:
     seq = Sequence(root, parse_camera(camera))
     truth = load_truth(root)
     if truth is None:
@@ -54,8 +57,7 @@ def bench_sequence(root: Path, camera: str, n_frames: int, both_sided: bool, con
                                     "hole": [], "ms": [],
             "refs": [], "seen": [], "seen_psnr": [], "unseen_psnr": []}
     depth_errors: list[np.ndarray] = []
-    sel_cfg = ReferenceSelectionConfig()
-    window = range(-15, 16) if both_sided else range(-15, 0)
+    window = range(-sel_cfg.reach, sel_cfg.reach + 1 if both_sided else 0)
     for i in picks:
         f, hole, desc = frame(i)
         cands = [Candidate(i + k, pose[i + k], frame(i + k)[2]) for k in window if k and i + k in pose]
@@ -175,6 +177,8 @@ def main() -> None:
     ap.add_argument("--references", default="causal,both-sided",
                     help="reference windows to compare (comma-separated): causal = the past 15 frames, "
                          "both-sided = +-15 frames")
+    ap.add_argument("--far-refs", default=str(ReferenceSelectionConfig().far_refs),
+                    help="second-chance references (restoration.selection.far_refs) to compare, comma-separated")
     ap.add_argument("--unseen-depth", default="border", help="depth of pixels no reference sees: border|none")
     args = ap.parse_args()
     if not args.sequences and not args.static:
@@ -189,10 +193,12 @@ def main() -> None:
           "depth restored % | ms/frame |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     windows = args.references.split(",")
-    for root, window, fill in itertools.product(args.sequences, windows, fills):
+    for root, window, fill, far in itertools.product(args.sequences, windows, fills, args.far_refs.split(",")):
         config = RestorationConfig(unseen_fill=fill, unseen_depth=args.unseen_depth)
-        r = bench_sequence(root, args.camera, args.frames, window == "both-sided", config)
-        print(f"| {root.name} | {window}, unseen: {fill}, depth: {args.unseen_depth} | {r['frames']} | "
+        sel_cfg = ReferenceSelectionConfig(far_refs=int(far))
+        r = bench_sequence(root, args.camera, args.frames, window == "both-sided", config, sel_cfg)
+        print(f"| {root.name} | {window}, far refs: {far}, unseen: {fill}, depth: {args.unseen_depth} | "
+              f"{r['frames']} | "
               f"{100 * r['hole']:.1f} | "
               f"{r['refs']:.1f} | {100 * r['seen']:.0f} | {r['pm_psnr']:.2f} | {r['seen_psnr']:.2f} | "
               f"{r['unseen_psnr']:.2f} | {r['telea_psnr']:.2f} | {100 * r['pm_depth_med']:.2f} | "

@@ -96,6 +96,7 @@ def test_the_ordered_pairs_are_published() -> None:
         ("culling.culling.threshold.d_min", "culling.culling.threshold.d_max"),
         ("features.min_depth_m", "features.max_depth_m"),
         ("restoration.selection.min_refs", "restoration.selection.max_refs"),
+        ("restoration.selection.window", "restoration.selection.far_window"),
         ("tracking.keyframe_min_frames", "tracking.keyframe_max_frames"),
     ]
 

@@ -2,11 +2,13 @@
 
 References (`references`): "causal" takes them from the last `window` frames, whose poses the tracker has
 already estimated and whose moving pixels culling has marked (streaming input has nothing else); "both-sided"
-(a job's uploaded sequence) adds the next `window` frames. A deferred restoration (below) waits until they have
-been tracked and takes them like the past ones, with the target at its own tracked pose (`deferred_future:
-tracked`); one that tracking reads at once reads them ahead through the sequence, with pose and moving pixels
-estimated against the target by geometry (`lookahead`), and the target at the motion model's prediction
-(geometry-first copying and PatchMatch absorb its small error). The restored RGB and
+(a job's uploaded sequence) adds the next `window` frames. Second-chance references come from up to
+`far_window` frames away (`selection.far_refs`). A deferred restoration (below) waits until the frames after
+its target have been tracked and takes them like the past ones, with the target at its own tracked pose
+(`deferred_future: tracked`); one that tracking reads at once reads the next `window` frames ahead through the
+sequence (no far future ones), with pose and moving pixels estimated against the target by geometry
+(`lookahead`), and the target at the motion model's prediction (geometry-first copying and PatchMatch absorb
+its small error). The restored RGB and
 depth replace the raw frame for keypoint depth and the dense map, and ORB keypoints found in the restored region
 (strong response, confident depth, seen by a reference) are handed to the tracker as extra features.
 
@@ -70,8 +72,8 @@ class RestorationStageConfig:
 
     deferred_future: str = "tracked"
     """Future references of a deferred restoration (a keyframe's or a preview's: nothing reads them before the run
-    ends), with "both-sided": "tracked" waits until the next `window` frames have been tracked and takes them as
-    the past ones are taken (the tracker's poses, culling's moving pixels), with the target at its own tracked
+    ends), with "both-sided": "tracked" waits until the next `selection.reach` frames have been tracked and takes
+    them as the past ones are taken (the tracker's poses, culling's moving pixels), with the target at its own tracked
     pose; "lookahead" reads them ahead, poses them by PnP against the target at its predicted pose and finds
     their moving pixels by geometry, as a restoration that tracking reads at once always does."""
 
@@ -107,12 +109,13 @@ class RestorationStage:
     def __init__(self, config: PipelineConfig, camera: Camera) -> None:
         self.cfg: RestorationStageConfig = config.section("restoration")
         self.camera = camera
-        self.past: deque[_Past] = deque(maxlen=self.cfg.selection.window)
+        self.past: deque[_Past] = deque(maxlen=self.cfg.selection.reach)
         self.ahead: dict[int, tuple[Frame, Features]] = {}
         """Future frames read for both-sided references, with their ORB features, by index."""
         self.collecting: dict[int, list[_Past]] = {}
         """The frames after a target whose deferred restoration waits for them ("tracked"), by target index."""
         self.future_refs = 0
+        self.far_refs = 0
         self.psnr: list[float] = []
         self.depth_err: list[float] = []
         self.restored_frames = 0
@@ -139,9 +142,9 @@ class RestorationStage:
         hole = inputs.dynamic_mask if inputs.dynamic_mask is not None else np.zeros(frame.depth.shape, bool)
         desc = inputs.features.desc if inputs.features is not None else None
         own = _Past(frame.index, frame.rgb, frame.depth, hole, desc)
-        window = self.cfg.selection.window
+        reach = self.cfg.selection.reach
         for k in list(self.collecting):
-            if frame.index - k > window:  # complete: this frame's `_record_pose` gave the last one its pose
+            if frame.index - k > reach:  # complete: this frame's `_record_pose` gave the last one its pose
                 del self.collecting[k]
             else:
                 self.collecting[k].append(own)
@@ -154,7 +157,7 @@ class RestorationStage:
                 tracked: _Tracked | None = None
                 if self.cfg.references == "both-sided" and self.cfg.deferred_future == "tracked":
                     tracked = _Tracked(own, self.collecting.setdefault(frame.index, []))
-                    inputs.deferred_delay = window + 1  # until the last future frame has its pose
+                    inputs.deferred_delay = reach + 1  # until the last future frame has its pose
                 inputs.deferred = lambda out, why: self._restore(frame, hole, desc, out, ctx, past, why, tracked)
             else:
                 self._restore(frame, hole, desc, inputs, ctx, past, "tracking")
@@ -207,6 +210,7 @@ class RestorationStage:
             cands += [Candidate(j, T_WC, self.ahead[j][1].desc) for j, (_, T_WC) in future.items()]
         sel = select_references(Candidate(frame.index, T_target, desc), cands, self.cfg.selection, both)
         self.relaxed += int(sel.relaxed)
+        self.far_refs += len(sel.far)
         for j in sel.indices:
             if j in future:  # moving pixels only for the chosen: the test costs a full-image warp
                 f, T_WC = future[j]
@@ -281,7 +285,8 @@ class RestorationStage:
                      "deferred_future": self.cfg.deferred_future if self.cfg.references == "both-sided" else None,
                      "restored_for": dict(sorted(self.restored_for.items())),
                      "not_restored": self.deferred - self.restored_for["keyframe"] - self.restored_for["preview"],
-                     "future_references": self.future_refs, "restored_features": self.extra,
+                     "future_references": self.future_refs, "far_references": self.far_refs,
+                     "restored_features": self.extra,
                      "relaxed_reference_choices": self.relaxed}
         if self.psnr:
             # over the restored frames only: on demand, those are the keyframes and previews (`restored_for`)

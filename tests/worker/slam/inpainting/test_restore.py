@@ -1,3 +1,5 @@
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -175,12 +177,53 @@ def test_reference_selection_prefers_informative_moved_frames():
         desc[i] = orb.detectAndCompute(g, None)[1]
     target = Candidate(19, frames[19], desc[19])
     cands = [Candidate(i, frames[i], desc[i]) for i in range(19)]
-    sel = select_references(target, cands, ReferenceSelectionConfig(min_translation_m=0.01, min_rotation_deg=0.0))
+    cfg = ReferenceSelectionConfig(min_translation_m=0.01, min_rotation_deg=0.0, far_refs=0)  # near ones only
+    sel = select_references(target, cands, cfg)
     assert 2 <= len(sel.indices) <= 4 and not sel.relaxed
     assert all(4 <= i <= 16 for i in sel.indices)  # inside the 15-frame window, at least 1 cm away
     assert all(sel.match_ratio[i] >= 0.15 for i in sel.indices)
     gaps = np.diff(sorted(sel.indices))
     assert np.all(gaps >= ReferenceSelectionConfig().min_gap_frames)  # spread out, not neighbours
+
+
+def test_far_references_are_second_chances_from_beyond_the_window():
+    """Near references are chosen as without far ones; up to `far_refs` more come from 16-30 frames away, after
+    them, by the same tests; both-sided, from either side; none with `far_refs` 0."""
+    orb = cv2.ORB_create(500)
+    tex = texture(5)
+    frames = {i: pose(0.004 * (i - 40)) for i in range(81)}
+    desc = {i: orb.detectAndCompute(cv2.cvtColor(render(T, tex)[0], cv2.COLOR_RGB2GRAY), None)[1]
+            for i, T in frames.items()}
+    target = Candidate(40, frames[40], desc[40])
+    cands = [Candidate(i, frames[i], desc[i]) for i in frames if i != 40]
+    cfg = ReferenceSelectionConfig(min_translation_m=0.01, min_rotation_deg=0.0)
+    near = select_references(target, cands, replace(cfg, far_refs=0), both_sided=True)
+    both = select_references(target, cands, cfg, both_sided=True)
+    assert near.far == () and all(abs(i - 40) <= 15 for i in near.indices)
+    assert both.indices[:len(near.indices)] == near.indices and both.relaxed == near.relaxed
+    assert len(both.far) == cfg.far_refs and both.indices[len(near.indices):] == list(both.far)
+    assert all(15 < abs(i - 40) <= 30 for i in both.far)
+    assert {i < 40 for i in both.far} == {True, False}  # alternating sides, as the near ones
+    causal = select_references(target, cands, cfg)
+    assert all(i < 40 for i in causal.indices) and len(causal.far) == cfg.far_refs
+
+
+def test_a_hole_pixel_takes_the_first_reference_that_sees_it():
+    """A later (second-chance) reference fills only what the earlier ones leave unseen: here the first sees
+    everything, so the second, whose colours are all wrong, changes nothing."""
+    tex = texture(3)
+    rgb, depth = render(pose(0.0), tex)
+    r_rgb, r_depth = render(pose(0.05), tex)
+    near = ReferenceView(r_rgb, r_depth, pose(0.05), np.zeros((H, W), bool))
+    wrong = ReferenceView(255 - r_rgb, r_depth, pose(-0.05), np.zeros((H, W), bool))
+    hole = person_hole()
+    cfg = RestorationConfig(colour_gain=False)
+    one = restore_frame(rgb, depth, hole, pose(0.0), [near], K, cfg)
+    two = restore_frame(rgb, depth, hole, pose(0.0), [near, wrong], K, cfg)
+    assert one.seen_by_reference.sum() > 0.98 * hole.sum()
+    seen = one.seen_by_reference
+    assert np.array_equal(two.rgb[seen], one.rgb[seen])
+    assert psnr(two.rgb, rgb, hole) >= 30
 
 
 def test_restoration_on_real_7scenes_beats_telea(redkitchen):
