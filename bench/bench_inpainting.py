@@ -9,8 +9,8 @@ masks, so the figures isolate the restoration from tracking and segmentation err
 holes, hole size and time/frame.
 
     .venv/bin/python bench/bench_inpainting.py SEQ_DIR [SEQ_DIR ...] [--frames 30] [--camera tum3] [--speed]
-        [--references causal,both-sided] [--far-refs 2[,0]] [--unseen-fill harmonic,telea,patchmatch]
-        [--unseen-depth border|none]
+        [--references causal,both-sided] [--far-refs 2[,0]] [--align-px 0[,6]]
+        [--unseen-fill harmonic,telea,patchmatch] [--unseen-depth border|none]
         [--static REAL_SEQ:CAMERA [--static-every 100] [--static-max-frames N]]
 
 `--static` uses real static frames as their own truth: artificial person-sized holes, no references, so the
@@ -179,6 +179,8 @@ def main() -> None:
                          "both-sided = +-15 frames")
     ap.add_argument("--far-refs", default=str(ReferenceSelectionConfig().far_refs),
                     help="second-chance references (restoration.selection.far_refs) to compare, comma-separated")
+    ap.add_argument("--align-px", default=str(RestorationConfig().align_px),
+                    help="restoration.restoration.align_px values to compare, comma-separated (0: off)")
     ap.add_argument("--unseen-depth", default="border", help="depth of pixels no reference sees: border|none")
     args = ap.parse_args()
     if not args.sequences and not args.static:
@@ -193,11 +195,13 @@ def main() -> None:
           "depth restored % | ms/frame |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     windows = args.references.split(",")
-    for root, window, fill, far in itertools.product(args.sequences, windows, fills, args.far_refs.split(",")):
-        config = RestorationConfig(unseen_fill=fill, unseen_depth=args.unseen_depth)
+    for root, window, fill, far, align in itertools.product(args.sequences, windows, fills, args.far_refs.split(","),
+                                                            args.align_px.split(",")):
+        config = RestorationConfig(unseen_fill=fill, unseen_depth=args.unseen_depth, align_px=int(align))
         sel_cfg = ReferenceSelectionConfig(far_refs=int(far))
         r = bench_sequence(root, args.camera, args.frames, window == "both-sided", config, sel_cfg)
-        print(f"| {root.name} | {window}, far refs: {far}, unseen: {fill}, depth: {args.unseen_depth} | "
+        print(f"| {root.name} | {window}, far refs: {far}, align: {align}, unseen: {fill}, "
+              f"depth: {args.unseen_depth} | "
               f"{r['frames']} | "
               f"{100 * r['hole']:.1f} | "
               f"{r['refs']:.1f} | {100 * r['seen']:.0f} | {r['pm_psnr']:.2f} | {r['seen_psnr']:.2f} | "

@@ -59,10 +59,11 @@ def depth_in_target(ref_depth: np.ndarray, yx: np.ndarray, T_tr: np.ndarray, K: 
 
 
 def sample_reference(ref_rgb: np.ndarray, ref_valid: np.ndarray, target_yx: np.ndarray, z_target: np.ndarray,
-                     T_tr: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                     T_tr: np.ndarray, K: np.ndarray, shift: tuple[int, int] = (0, 0)) -> tuple[np.ndarray, np.ndarray]:
     """Colours (N, 3) uint8 of target pixels `target_yx` (N, 2) with depth `z_target` (N,) m, looked up in the
-    reference at the exact sub-pixel point they come from (bilinear), and a bool (N,) that is False where a
-    bilinear neighbour is not `ref_valid` (a moving object's pixel must not bleed in; keep the splat's pixel).
+    reference at the exact sub-pixel point they come from (bilinear) moved by `shift` (dy, dx) reference pixels
+    (`align.ring_shift`), and a bool (N,) that is False where a bilinear neighbour is not `ref_valid` (a moving
+    object's pixel must not bleed in; keep the splat's pixel).
 
     The splat says which reference pixel lands on a target pixel, rounded to whole pixels both ways; sampling
     back through the target pixel's centre removes that half-pixel misalignment on textured backgrounds."""
@@ -71,8 +72,8 @@ def sample_reference(ref_rgb: np.ndarray, ref_valid: np.ndarray, target_yx: np.n
     T_rt = np.linalg.inv(T_tr)
     Xr = X @ T_rt[:3, :3].T + T_rt[:3, 3]
     zr = np.maximum(Xr[:, 2], 1e-6)
-    u = (fx * Xr[:, 0] / zr + cx).astype(np.float32)
-    v = (fy * Xr[:, 1] / zr + cy).astype(np.float32)
+    u = (fx * Xr[:, 0] / zr + cx + shift[1]).astype(np.float32)
+    v = (fy * Xr[:, 1] / zr + cy + shift[0]).astype(np.float32)
     n, cols = len(u), 1024  # remap wants maps under 32767 wide: sample the N points as a (rows, 1024) image
     rows = max(1, -(-n // cols))
     pad = rows * cols - n
