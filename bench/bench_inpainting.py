@@ -201,9 +201,7 @@ def main() -> None:
         sel_cfg = ReferenceSelectionConfig(far_refs=int(far))
         r = bench_sequence(root, args.camera, args.frames, window == "both-sided", config, sel_cfg)
         print(f"| {root.name} | {window}, far refs: {far}, align: {align}, unseen: {fill}, "
-              f"depth: {args.unseen_depth} | "
-              f"{r['frames']} | "
-              f"{100 * r['hole']:.1f} | "
+              f"depth: {args.unseen_depth} | {r['frames']} | {100 * r['hole']:.1f} | "
               f"{r['refs']:.1f} | {100 * r['seen']:.0f} | {r['pm_psnr']:.2f} | {r['seen_psnr']:.2f} | "
               f"{r['unseen_psnr']:.2f} | {r['telea_psnr']:.2f} | {100 * r['pm_depth_med']:.2f} | "
               f"{100 * r['depth_p90']:.2f} | {100 * r['depth_bad']:.1f} | {100 * r['depth_valid']:.0f} | "

@@ -37,3 +37,16 @@ def render(T_WC: np.ndarray, tex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     rgb = cv2.remap(tex, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
     depth = (s * rays[..., 2]).astype(np.float32)  # z in the camera frame
     return rgb, depth
+
+
+def psnr(a: np.ndarray, b: np.ndarray, m: np.ndarray) -> float:
+    """PSNR (dB) of uint8 images `a` against `b` over the bool mask `m`."""
+    mse = np.mean((a[m].astype(float) - b[m].astype(float)) ** 2)
+    return float(10 * np.log10(255**2 / max(mse, 1e-9)))
+
+
+def person_hole(h: int = H, w: int = W, frac_w: float = 0.12, frac_h: float = 0.42) -> np.ndarray:
+    """A person-like upright ellipse at the image centre, bool (h, w)."""
+    m = np.zeros((h, w), np.uint8)
+    cv2.ellipse(m, (w // 2, h // 2), (int(w * frac_w), int(h * frac_h)), 0, 0, 360, 1, -1)
+    return m.astype(bool)

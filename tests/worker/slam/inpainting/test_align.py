@@ -1,8 +1,7 @@
 import numpy as np
 import pytest
 
-from tests.worker.slam.inpainting.scene import H, K, W, pose, render, texture
-from tests.worker.slam.inpainting.test_restore import person_hole, psnr
+from tests.worker.slam.inpainting.scene import H, K, W, person_hole, pose, psnr, render, texture
 from worker.slam.inpainting.align import hole_ring, ring_shift
 from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, restore_frame
 from worker.slam.inpainting.warp import relative_pose

@@ -4,23 +4,12 @@ import cv2
 import numpy as np
 import pytest
 
-from tests.worker.slam.inpainting.scene import H, K, W, pose, render, texture
+from tests.worker.slam.inpainting.scene import H, K, W, person_hole, pose, psnr, render, texture
 from worker.slam.inpainting.patchmatch import patchmatch_fill
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
 from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, _colour_gain, restore_frame
 from worker.slam.inpainting.stage import RestorationStageConfig
 from worker.slam.inpainting.warp import depth_in_target, forward_warp, relative_pose
-
-
-def psnr(a, b, m):
-    mse = np.mean((a[m].astype(float) - b[m].astype(float)) ** 2)
-    return 10 * np.log10(255**2 / max(mse, 1e-9))
-
-
-def person_hole(h=H, w=W, frac_w=0.12, frac_h=0.42):
-    m = np.zeros((h, w), np.uint8)
-    cv2.ellipse(m, (w // 2, h // 2), (int(w * frac_w), int(h * frac_h)), 0, 0, 360, 1, -1)
-    return m.astype(bool)
 
 
 def test_forward_warp_is_exact_for_pure_translation():
