@@ -14,6 +14,8 @@ import cv2
 import numpy as np
 from numba import njit
 
+from worker.slam.inpainting.warp import project_into_reference
+
 MAX_RING_PIXELS = 1500
 """Ring pixels scored per shift (evenly picked): the shift is one 2-vector, and its cost grows with them."""
 MIN_RING_PIXELS = 200
@@ -57,13 +59,9 @@ def ring_shift(ring: Ring, ref_grey: np.ndarray, ref_valid: np.ndarray, T_rt: np
     the target on `ring`. `ref_grey` (H, W) uint8 or float; `ref_valid` (H, W) bool marks the reference pixels that
     may be used (static). (0, 0) when the ring gives too little to go on."""
     h, w = ref_grey.shape
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    z = ring.depth
-    X = np.stack([(ring.xs - cx) / fx * z, (ring.ys - cy) / fy * z, z], 1) @ T_rt[:3, :3].T + T_rt[:3, 3]
-    zr = np.maximum(X[:, 2], 1e-6)
-    u, v = fx * X[:, 0] / zr + cx, fy * X[:, 1] / zr + cy
+    u, v, z_ref = project_into_reference(np.stack([ring.ys, ring.xs], 1), ring.depth, T_rt, K)
     x0, y0 = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
-    ok = (X[:, 2] > 1e-3) & (x0 - radius >= 0) & (y0 - radius >= 0) & (x0 + 1 + radius < w) & \
+    ok = (z_ref > 1e-3) & (x0 - radius >= 0) & (y0 - radius >= 0) & (x0 + 1 + radius < w) & \
         (y0 + 1 + radius < h)
     ok[ok] &= ref_valid[y0[ok], x0[ok]]
     if ok.sum() < MIN_RING_PIXELS:

@@ -137,7 +137,8 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
     geo = init_src >= 0
     d = np.zeros(len(py), np.float32)  # each hole pixel's depth in the target, through its match
     if config.geometry_first and geo.any():
-        ring = hole_ring(rgb, depth, hole, region, config.align_ring_px) if config.align_px else None
+        aligned = config.align_px and config.subpixel  # the shift moves the sub-pixel samples
+        ring = hole_ring(rgb, depth, hole, region, config.align_ring_px) if aligned else None
         for s, ref in enumerate(refs):
             sel = np.flatnonzero(geo & (init_src == s))
             if not len(sel):

@@ -58,6 +58,18 @@ def depth_in_target(ref_depth: np.ndarray, yx: np.ndarray, T_tr: np.ndarray, K: 
     return np.where((z > 0) & (zt > 0), zt, 0.0).astype(np.float32)
 
 
+def project_into_reference(target_yx: np.ndarray, z_target: np.ndarray, T_rt: np.ndarray,
+                           K: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where target pixels `target_yx` (N, 2) (y, x) with depth `z_target` (N,) m land in a reference camera
+    (T_rt: target camera -> reference camera): sub-pixel columns u (N,), rows v (N,) and their depth there (N,)
+    m, all float64; u, v are meaningless where that depth is not positive."""
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    X = np.stack([(target_yx[:, 1] - cx) / fx * z_target, (target_yx[:, 0] - cy) / fy * z_target, z_target], 1)
+    Xr = X @ T_rt[:3, :3].T + T_rt[:3, 3]
+    zr = np.maximum(Xr[:, 2], 1e-6)
+    return fx * Xr[:, 0] / zr + cx, fy * Xr[:, 1] / zr + cy, Xr[:, 2]
+
+
 def sample_reference(ref_rgb: np.ndarray, ref_valid: np.ndarray, target_yx: np.ndarray, z_target: np.ndarray,
                      T_tr: np.ndarray, K: np.ndarray, shift: tuple[int, int] = (0, 0)) -> tuple[np.ndarray, np.ndarray]:
     """Colours (N, 3) uint8 of target pixels `target_yx` (N, 2) with depth `z_target` (N,) m, looked up in the
@@ -67,13 +79,9 @@ def sample_reference(ref_rgb: np.ndarray, ref_valid: np.ndarray, target_yx: np.n
 
     The splat says which reference pixel lands on a target pixel, rounded to whole pixels both ways; sampling
     back through the target pixel's centre removes that half-pixel misalignment on textured backgrounds."""
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    X = np.stack([(target_yx[:, 1] - cx) / fx * z_target, (target_yx[:, 0] - cy) / fy * z_target, z_target], 1)
-    T_rt = np.linalg.inv(T_tr)
-    Xr = X @ T_rt[:3, :3].T + T_rt[:3, 3]
-    zr = np.maximum(Xr[:, 2], 1e-6)
-    u = (fx * Xr[:, 0] / zr + cx + shift[1]).astype(np.float32)
-    v = (fy * Xr[:, 1] / zr + cy + shift[0]).astype(np.float32)
+    u64, v64, z_ref = project_into_reference(target_yx, z_target, np.linalg.inv(T_tr), K)
+    u = (u64 + shift[1]).astype(np.float32)
+    v = (v64 + shift[0]).astype(np.float32)
     n, cols = len(u), 1024  # remap wants maps under 32767 wide: sample the N points as a (rows, 1024) image
     rows = max(1, -(-n // cols))
     pad = rows * cols - n
@@ -81,7 +89,7 @@ def sample_reference(ref_rgb: np.ndarray, ref_valid: np.ndarray, target_yx: np.n
                     cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3)[:n]
     h, w = ref_valid.shape
     x0, y0 = np.floor(u).astype(int), np.floor(v).astype(int)
-    ok = (Xr[:, 2] > 1e-3) & (x0 >= 0) & (y0 >= 0) & (x0 + 1 < w) & (y0 + 1 < h)
+    ok = (z_ref > 1e-3) & (x0 >= 0) & (y0 >= 0) & (x0 + 1 < w) & (y0 + 1 < h)
     xs, ys = np.clip(x0, 0, w - 2), np.clip(y0, 0, h - 2)
     ok &= ref_valid[ys, xs] & ref_valid[ys, xs + 1] & ref_valid[ys + 1, xs] & ref_valid[ys + 1, xs + 1]
     return rgb, ok
