@@ -14,12 +14,16 @@ def relative_pose(T_WC_ref: np.ndarray, T_WC_tgt: np.ndarray) -> np.ndarray:
 @njit(cache=True, nogil=True)
 def _splat(depth, valid, R, t, fx, fy, cx, cy, y0, y1, x0, x1, out, zbuf):
     h, w = depth.shape
+    ray_x = np.empty(w)  # (x - cx) / fx once per column, not per pixel (the same arithmetic)
+    for x in range(w):
+        ray_x[x] = (x - cx) / fx
     for y in range(h):
+        ray_y = (y - cy) / fy
         for x in range(w):
             z = depth[y, x]
             if z <= 0 or not valid[y, x]:
                 continue
-            X, Y = (x - cx) / fx * z, (y - cy) / fy * z
+            X, Y = ray_x[x] * z, ray_y * z
             zt = R[2, 0] * X + R[2, 1] * Y + R[2, 2] * z + t[2]
             if zt <= 1e-3:
                 continue
