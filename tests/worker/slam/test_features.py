@@ -8,6 +8,7 @@ import pytest
 from tests.worker.slam.synthetic_room import K_SYN, pose, render
 from worker.slam.config import FeatureConfig
 from worker.slam.features.depth import backproject, lookup_depth
+from worker.slam.features.grid import PointGrid
 from worker.slam.features.matching import cross_checked, hamming, match_ratio
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.search import KeypointIndex, match_near_predictions
@@ -110,17 +111,13 @@ def test_cross_checked_on_real_orb(view):
 
 
 def _reference_near_predictions(feats, uv_pred, desc, radius, max_hamming, ratio, level, taken):
-    """The search written plainly: every keypoint within the radius among the K nearest, then the rules."""
-    from scipy.spatial import cKDTree
+    """The search written plainly: the K nearest keypoints within the radius, then the rules."""
     k = min(8, len(feats))
-    d, cand = cKDTree(feats.uv).query(uv_pred, k=k, distance_upper_bound=float(radius.max()))
-    d, cand = d.reshape(len(uv_pred), k), cand.reshape(len(uv_pred), k)
     best = {}
     for p in range(len(uv_pred)):
         dist = []
-        for j in range(k):
-            c = cand[p, j]
-            if c >= len(feats) or d[p, j] > radius[p] or taken[c] or abs(feats.octave[c] - level[p]) > 1:
+        for c in _plain_nearest(feats.uv, uv_pred[p], radius[p], k):
+            if taken[c] or abs(feats.octave[c] - level[p]) > 1:
                 continue
             dist.append((int(hamming(desc[p], feats.desc[c])), c))
         if not dist:
@@ -137,7 +134,31 @@ def _reference_near_predictions(feats, uv_pred, desc, radius, max_hamming, ratio
     return np.array([best[c][1] for c in ki], int), ki
 
 
-def test_match_near_predictions_follows_its_rules():
+def _plain_nearest(points, q, radius, k):
+    """The k points nearest to q within radius, nearest first, equal distances by index."""
+    d = np.sqrt(((points - q) ** 2).sum(1))
+    within = np.flatnonzero(d <= radius)
+    return within[np.lexsort((within, d[within]))][:k]
+
+
+def test_the_grid_finds_the_k_nearest_within_the_radius_with_ties_by_index():
+    """PointGrid.nearest against sorting every distance: integer positions (many equal distances, repeated
+    points), queries outside the points' extent, radii across several cells, NaN and infinite queries."""
+    rng = np.random.default_rng(5)
+    pts = rng.integers(-20, 120, (300, 2)).astype(np.float64)
+    pts[200:220] = pts[:20]  # the same position twice
+    q = np.vstack([rng.uniform(-60, 160, (400, 2)), rng.integers(-20, 120, (100, 2)), [[np.nan, 5.0], [np.inf, 0.0]]])
+    radius = rng.uniform(0.5, 50, len(q))
+    for k in (1, 5, 8):
+        got = PointGrid.of(pts, cell_px=7.0).nearest(q, radius, k)
+        for i in range(len(q)):
+            want = _plain_nearest(pts, q[i], radius[i], k) if np.isfinite(q[i]).all() else np.zeros(0, int)
+            assert np.array_equal(got[i][got[i] >= 0], want) and (got[i][len(want):] == -1).all(), (k, i)
+    assert (PointGrid.of(pts).nearest(q[:3], 1e9, 300) >= 0).all()  # everything, with one radius for all
+
+
+@pytest.mark.parametrize("grid", [False, True])
+def test_match_near_predictions_follows_its_rules(grid):
     """Ratio test against the second candidate (a tie at the least fails), radius, octave and `taken`
     filters, one prediction per keypoint (the closest, the first of equals): the compiled search against a
     plain one on random keypoints with descriptors drawn from a few shared bases (many near-ties)."""
@@ -152,7 +173,7 @@ def test_match_near_predictions_follows_its_rules():
     desc = desc_kp[pick] ^ (rng.random((p, 32)) < 0.05).astype(np.uint8)
     radius = rng.uniform(3, 12, p)
     level, taken = rng.integers(0, 4, p), rng.random(n) < 0.1
-    got = match_near_predictions(KeypointIndex(feats), uv_pred, desc, radius, 60, 0.9, level, taken)
+    got = match_near_predictions(KeypointIndex(feats, grid), uv_pred, desc, radius, 60, 0.9, level, taken)
     want = _reference_near_predictions(feats, uv_pred, desc, radius, 60, 0.9, level, taken)
     assert len(got[0]) > 50 and np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 

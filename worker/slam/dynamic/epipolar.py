@@ -73,6 +73,41 @@ def fundamental_ransac(p_prev: np.ndarray, p_cur: np.ndarray, threshold_px: floa
     return F
 
 
+def fundamental_from_seed(p_prev: np.ndarray, p_cur: np.ndarray, F_seed: np.ndarray, threshold_px: float = 1.0,
+                          min_inliers: float = 0.5, rounds: int = 2) -> np.ndarray | None:
+    """F (3x3) fitted by least squares (OpenCV's eight-point) to the matches (N, 2) px that `F_seed` explains
+    within `threshold_px`, then to those the fit explains, `rounds` times while the consensus does not shrink;
+    None when the seed explains fewer than `min_inliers` of them (the caller falls back to RANSAC).
+
+    The seed is the fundamental matrix of a pose that is already known (`fundamental_of_pose`): it plays the
+    part of RANSAC's best hypothesis, so the ~900 random seven-point hypotheses are not needed."""
+    inl = epipolar_distance(F_seed, p_prev, p_cur) < threshold_px
+    if len(p_prev) < 8 or inl.mean() < min_inliers:
+        return None
+    F = F_seed
+    for _ in range(rounds):
+        if inl.sum() < 8:
+            break
+        fit, _ = cv2.findFundamentalMat(p_prev[inl].astype(np.float64), p_cur[inl].astype(np.float64),
+                                        cv2.FM_8POINT)
+        if fit is None or fit.shape != (3, 3):
+            break
+        fit_inl = epipolar_distance(fit, p_prev, p_cur) < threshold_px
+        if fit_inl.sum() < inl.sum():
+            break
+        F, inl = fit, fit_inl
+    return F
+
+
+def fundamental_of_pose(R: np.ndarray, t: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """F (3x3) with x_cur^T F x_prev = 0 for the relative pose X_cur = R X_prev + t and intrinsics K:
+    K^-T [t]x R K^-1."""
+    K_inv = np.linalg.inv(K)
+    t = np.asarray(t, np.float64).ravel()
+    t_x = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
+    return K_inv.T @ t_x @ R @ K_inv
+
+
 def epipolar_distance(F: np.ndarray, p_prev: np.ndarray, p_cur: np.ndarray) -> np.ndarray:
     """Distance (N,) in pixels of each current point to the epipolar line F x_prev of its match."""
     ones = np.ones((len(p_prev), 1))

@@ -22,24 +22,48 @@ def depth_edges(depth: np.ndarray, rel_jump: float = 0.05) -> np.ndarray:
     return edges.view(bool)
 
 
-def split_segments(mask: np.ndarray, depth: np.ndarray, min_area: int = 200,
-                   rel_jump: float = 0.05) -> np.ndarray:
+def split_segments(mask: np.ndarray, depth: np.ndarray, min_area: int = 200, rel_jump: float = 0.05,
+                   step: int = 1) -> np.ndarray:
     """int32 labels (H, W): 0 = not in `mask`, 1..n = segments of at least `min_area` pixels.
 
     Components are computed with depth edges cut out, then edge pixels are given back to a neighbouring
-    segment (dilation) so the segment still covers the whole object outline.
+    segment (dilation) so the segment still covers the whole object outline. With `step` > 1 on every
+    step-th row and column only (`min_area` scaled to match), each mask pixel then taking the label of the
+    sample at the top left of its step x step block (blocks from the image's corner): the split of
+    `mask[::step, ::step]` spread back, step² times less work, segments accurate to `step` px.
     """
-    m = mask.astype(bool)
+    m = mask.astype(bool, copy=False)
     out = np.zeros(mask.shape, np.int32)
     rows, cols = np.flatnonzero(m.any(1)), np.flatnonzero(m.any(0))
     if len(rows) == 0:
         return out
-    # Work on the mask's bounding box (+1 px so depth jumps at its border are seen): people cover ~15 %.
+    # Work on the mask's bounding box, one sample wider so depth jumps at its border are seen (people cover
+    # ~15 %), starting on a sample of the whole image's grid.
     h, w = m.shape
-    y0, y1 = max(rows[0] - 1, 0), min(rows[-1] + 2, h)
-    x0, x1 = max(cols[0] - 1, 0), min(cols[-1] + 2, w)
-    out[y0:y1, x0:x1] = _split(m[y0:y1, x0:x1], depth[y0:y1, x0:x1], min_area, rel_jump)
+    y0, y1 = max(rows[0] - step, 0) // step * step, min(rows[-1] + step + 1, h)
+    x0, x1 = max(cols[0] - step, 0) // step * step, min(cols[-1] + step + 1, w)
+    if step == 1:
+        out[y0:y1, x0:x1] = _split(m[y0:y1, x0:x1], depth[y0:y1, x0:x1], min_area, rel_jump)
+        return out
+    box = np.s_[y0:y1:step, x0:x1:step]
+    coarse = _split(np.ascontiguousarray(m[box]), np.ascontiguousarray(depth[box]), -(-min_area // step**2),
+                    rel_jump)
+    _spread_labels(coarse, m[y0:y1, x0:x1], step, out[y0:y1, x0:x1])
     return out
+
+
+@njit(cache=True, nogil=True)
+def _spread_labels(coarse, m, step, out):
+    """`out` (H, W) = the label of `coarse` (ceil(H / step), ceil(W / step)) at each pixel's block where `m`
+    holds, else 0."""
+    h, w = m.shape
+    row = np.empty(w, out.dtype)
+    for y in range(h):
+        if y % step == 0:  # one coarse row spread over the width, reused by the block's rows
+            for x in range(w):
+                row[x] = coarse[y // step, x // step]
+        for x in range(w):
+            out[y, x] = row[x] * m[y, x]
 
 
 def _split(m: np.ndarray, depth: np.ndarray, min_area: int, rel_jump: float) -> np.ndarray:

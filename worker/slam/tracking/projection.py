@@ -30,7 +30,7 @@ def search_by_projection(index: KeypointIndex, X_w: np.ndarray, desc: np.ndarray
     """
     P = len(X_w)
     empty = ProjectionMatches(np.zeros(0, int), np.zeros(0, int), np.zeros(P, bool))
-    if P == 0 or index.tree is None:
+    if P == 0 or index.empty:
         return empty
     R_CW = T_WC[:3, :3].T
     center = T_WC[:3, 3]

@@ -262,6 +262,22 @@ def test_segments_are_the_plain_rules_on_ragged_masks_with_holes_and_jumps():
         assert got.dtype == np.int32 and np.array_equal(got, _plain_split(mask, depth, min_area)), t
 
 
+def test_segments_on_every_second_pixel_are_the_coarse_split_spread_back_over_the_mask():
+    """step 2: the plain rules on `mask[::2, ::2]` (min_area / 4), each mask pixel taking the label of its 2x2
+    block's top-left sample; blobs anywhere in odd-sized images, so the working box meets the border."""
+    rng = np.random.default_rng(11)
+    for t in range(40):
+        h, w = (int(v) for v in rng.integers(9, 91, 2))
+        blocks = rng.choice([1.0, 1.5, 3.0], size=(h // 6 + 1, w // 6 + 1)).astype(np.float32)
+        depth = cv2.resize(blocks, (w, h), interpolation=cv2.INTER_NEAREST)
+        depth[rng.random((h, w)) < 0.03] = 0.0
+        mask = cv2.dilate((rng.random((h, w)) < 0.02).astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
+        coarse = _plain_split(mask[::2, ::2], depth[::2, ::2], 5)
+        want = np.where(mask, np.repeat(np.repeat(coarse, 2, 0), 2, 1)[:h, :w], 0)
+        got = split_segments(mask, depth, 18, step=2)  # ceil(18 / 4) = 5
+        assert got.dtype == np.int32 and np.array_equal(got, want), t
+
+
 def test_pixels_of_chosen_segments_are_numpys_lookup():
     from worker.slam.dynamic.segments import pixels_of
     labels = np.random.default_rng(1).integers(0, 7, (31, 45)).astype(np.int32)
@@ -386,3 +402,42 @@ def test_an_ambiguous_object_match_gives_way_to_the_static_one_and_a_mover_keeps
     # two current keypoints whose guided matches are one previous keypoint: it stays with the first
     p, c = _prefer_static(brute_prev, brute_cur, Matches(np.array([2, 2]), np.array([0, 1])), prev, cur, within=256)
     assert p.tolist() == [2] and c.tolist() == [0]
+
+
+def _two_views(rng, n=150, outliers=0.3):
+    """Matches (n, 2) px of random points 1.5-4 m away seen before and after a known motion (R, t), a share
+    of them moved by 5-20 px (movers), with 0.2 px noise."""
+    from scipy.spatial.transform import Rotation
+    X = np.column_stack([rng.uniform(-1.5, 1.5, (n, 2)), rng.uniform(1.5, 4.0, n)])
+    R, t = Rotation.from_euler("xyz", [1.0, -2.0, 0.5], degrees=True).as_matrix(), np.array([0.08, 0.01, 0.02])
+    proj = lambda P: (P @ K.T)[:, :2] / P[:, 2:]  # noqa: E731
+    p0, p1 = proj(X) + rng.normal(0, 0.2, (n, 2)), proj(X @ R.T + t) + rng.normal(0, 0.2, (n, 2))
+    moved = rng.random(n) < outliers
+    p1[moved] += rng.uniform(5, 20, (moved.sum(), 2)) * rng.choice([-1, 1], (moved.sum(), 2))
+    return p0, p1, R, t, moved
+
+
+def test_a_fundamental_matrix_seeded_by_a_nearby_pose_separates_movers_like_ransac():
+    """The seed (a pose 0.3° and 1 cm off) replaces RANSAC's hypotheses: the least-squares fit on what it
+    explains tells movers from static points at least as well as RANSAC, with residuals no larger; a seed
+    that explains too little gives None (the caller then runs RANSAC)."""
+    from scipy.spatial.transform import Rotation
+
+    from worker.slam.dynamic.epipolar import (
+        epipolar_distance,
+        fundamental_from_seed,
+        fundamental_of_pose,
+        fundamental_ransac,
+    )
+    rng = np.random.default_rng(2)
+    p0, p1, R, t, moved = _two_views(rng)
+    exact = epipolar_distance(fundamental_of_pose(R, t, K), p0, p1)
+    assert np.median(exact[~moved]) < 0.3 and np.median(exact[moved]) > 3  # the helper's own F is right
+    off = Rotation.from_euler("y", 0.3, degrees=True).as_matrix()
+    F = fundamental_from_seed(p0, p1, fundamental_of_pose(off @ R, t + [0.01, 0, 0], K), 1.0, 0.5)
+    d = epipolar_distance(F, p0, p1)
+    ransac = epipolar_distance(fundamental_ransac(p0, p1, 1.0), p0, p1)
+    right, right_ransac = ((d < 1.0) == ~moved).mean(), ((ransac < 1.0) == ~moved).mean()  # 1.0 and 0.98 here
+    assert right > 0.95 and right >= right_ransac and np.median(d[~moved]) <= np.median(ransac[~moved])
+    wrong = Rotation.from_euler("y", 5.0, degrees=True).as_matrix()
+    assert fundamental_from_seed(p0, p1, fundamental_of_pose(wrong @ R, t, K), 1.0, 0.5) is None
