@@ -80,7 +80,7 @@ def _block_means(values, known, scale):
     """The (h, w, C) `values` on a grid `scale` times coarser: bool (ceil(h / s), ceil(w / s)), whether a block
     is known (all its pixels known and inside the window: no unknown value averaged in), and the blocks' means
     in float64 (0 where not known), summed row by row. One pass instead of numpy's padding, reshapes and
-    reductions (6 ms of a 15 % hole's 30)."""
+    reductions over the window, which after the solve were the fill's largest cost."""
     h, w, n_ch = values.shape
     ch, cw = -(-h // scale), -(-w // scale)
     known_c = np.zeros((ch, cw), np.bool_)
