@@ -81,8 +81,10 @@ def fundamental_from_seed(p_prev: np.ndarray, p_cur: np.ndarray, F_seed: np.ndar
 
     The seed is the fundamental matrix of a pose that is already known (`fundamental_of_pose`): it plays the
     part of RANSAC's best hypothesis, so the ~900 random seven-point hypotheses are not needed."""
+    if len(p_prev) < 8 or not np.abs(F_seed).max() > 0:  # no translation: the seed has no epipolar lines
+        return None
     inl = epipolar_distance(F_seed, p_prev, p_cur) < threshold_px
-    if len(p_prev) < 8 or inl.mean() < min_inliers:
+    if inl.mean() < min_inliers:
         return None
     F = F_seed
     for _ in range(rounds):

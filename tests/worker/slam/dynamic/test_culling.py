@@ -441,3 +441,4 @@ def test_a_fundamental_matrix_seeded_by_a_nearby_pose_separates_movers_like_rans
     assert right > 0.95 and right >= right_ransac and np.median(d[~moved]) <= np.median(ransac[~moved])
     wrong = Rotation.from_euler("y", 5.0, degrees=True).as_matrix()
     assert fundamental_from_seed(p0, p1, fundamental_of_pose(wrong @ R, t, K), 1.0, 0.5) is None
+    assert fundamental_from_seed(p0, p1, fundamental_of_pose(R, np.zeros(3), K), 1.0, 0.5) is None  # rotation only
