@@ -122,8 +122,9 @@ class CullingConfig:
     """Segments are split on every `segment_step`-th row and column and their labels spread back to the mask's
     pixels (`segments.split_segments`): a quarter of the work at 2, the costliest part of culling where
     segmentation marks half the view (MSNET on Bonn: 4.3 ms per frame at 1). The networks' masks are
-    upsampled from 256x192 (MSNET) or 257x257 (the teacher), so 2 px blocks lose none of their detail; the
-    decisions are made on keypoints and 8 px cells, and the exclusion band is wider than a block."""
+    upsampled bilinearly from 256x192 (MSNET, with `segmenter.guided_radius` 0, the default) or 257x257 (the
+    teacher), so 2 px blocks lose none of their detail; the decisions are made on keypoints and 8 px cells,
+    and the exclusion band is wider than a block."""
     cluster_cell: int = valid(24, 1, 1_024)
     """Grid cell (pixels) for clustering moving points in the geometry path."""
     cluster_min_points: int = valid(4, 1, 100_000)
