@@ -19,7 +19,7 @@ class KeypointIndex:
     Two kinds that find the same K nearest and differ only in the order of equal distances (common: keypoints
     on integer positions, one position at several octaves): a k-d tree (the tracker's; its trajectories are
     compared byte for byte across versions, and a new order of ties moved 7-Scenes' 1000-frame ATE by 4 %)
-    and, with `grid`, a compiled grid (`PointGrid`: a third of the tree's cost on a thousand keypoints; culling
+    and, with `grid`, a compiled grid (`PointGrid`: under half the tree's cost on a thousand keypoints; culling
     builds and queries two or three per frame)."""
 
     def __init__(self, feats: Features, grid: bool = False) -> None:
