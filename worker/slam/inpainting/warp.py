@@ -5,6 +5,8 @@ import cv2
 import numpy as np
 from numba import njit
 
+from worker.slam.features.depth import backproject
+
 
 def relative_pose(T_WC_ref: np.ndarray, T_WC_tgt: np.ndarray) -> np.ndarray:
     """T_tr: reference camera -> target camera (4x4)."""
@@ -55,10 +57,8 @@ def forward_warp(ref_depth: np.ndarray, ref_valid: np.ndarray, T_tr: np.ndarray,
 
 def depth_in_target(ref_depth: np.ndarray, yx: np.ndarray, T_tr: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Depth (N,) in the target camera of reference pixels `yx` (N, 2); 0 where the reference has none."""
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     z = ref_depth[yx[:, 0], yx[:, 1]].astype(np.float64)
-    X = np.stack([(yx[:, 1] - cx) / fx * z, (yx[:, 0] - cy) / fy * z, z], axis=1)
-    zt = X @ T_tr[2, :3] + T_tr[2, 3]
+    zt = backproject(yx[:, ::-1], z, K) @ T_tr[2, :3] + T_tr[2, 3]
     return np.where((z > 0) & (zt > 0), zt, 0.0).astype(np.float32)
 
 
@@ -68,8 +68,7 @@ def project_into_reference(target_yx: np.ndarray, z_target: np.ndarray, T_rt: np
     (T_rt: target camera -> reference camera): sub-pixel columns u (N,), rows v (N,) and their depth there (N,)
     m, all float64; u, v are meaningless where that depth is not positive."""
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    X = np.stack([(target_yx[:, 1] - cx) / fx * z_target, (target_yx[:, 0] - cy) / fy * z_target, z_target], 1)
-    Xr = X @ T_rt[:3, :3].T + T_rt[:3, 3]
+    Xr = backproject(target_yx[:, ::-1], z_target, K) @ T_rt[:3, :3].T + T_rt[:3, 3]
     zr = np.maximum(Xr[:, 2], 1e-6)
     return fx * Xr[:, 0] / zr + cx, fy * Xr[:, 1] / zr + cy, Xr[:, 2]
 
