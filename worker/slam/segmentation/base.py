@@ -107,7 +107,8 @@ class SegmenterConfig:
     with_probs: bool = True
     """Also return per-class probabilities at full resolution (costs a resize per class)."""
     dynamic_classes: tuple[str, ...] | None = None
-    """Override the backend's potentially dynamic classes; None keeps its default (person, chair)."""
+    """Override the backend's potentially dynamic classes; None keeps its default (the shipped MSNET checkpoint:
+    person; the teacher: person and chair)."""
     guided_radius: int = valid(0, 0, 64)
     """msnet: upsample the network's probabilities with a fast guided filter (grey image as guide) of this
     radius, in pixels of its output grid (13 ≈ 32 px at 640x480); 0 = plain bilinear upsampling. Off: the
