@@ -150,8 +150,9 @@ class CullingConfig:
     dilation_px: int = valid(3, 0, 256)
     """The exclude mask is the dynamic mask dilated by this many pixels (a keypoint on the silhouette describes a
     patch that moves with the object). With true masks a band of half the ORB patch is best, but MSNET's masks
-    already spill past people and a wider band starves tracking, hence the narrow default. Use 15 with a precise
-    segmenter (README, the exclusion-band table)."""
+    already spill past people and a wider band starved tracking, hence the narrow default. With the 2026-12-04
+    MSNET 15 px helps the augmented proxies (-17 % mean ATE) but costs the real Bonn frames 14 % (README, the
+    exclusion-band tables)."""
     cluster_dilation_px: int = valid(3, 0, 256)
     """The same for the geometric clusters, whose regions are already whole grid cells wide (a wider band
     there removed static features and cost `geometry-only` accuracy on static 7-Scenes)."""
