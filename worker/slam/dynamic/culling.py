@@ -52,6 +52,10 @@ class CullingConfig:
     rarely match across frames) and removes static ones too."""
     ransac_px: float = valid(1.0, 0.01, 100.0)
     """RANSAC inlier threshold of the fundamental matrix (pixels)."""
+    usac: bool = False
+    """F's RANSAC and the depth test's PnP-RANSAC fallback by OpenCV's USAC instead of classic RANSAC: the
+    slowest frames' culling 3x cheaper (Bonn mean 7.2 -> 5.3 ms), but worse `geometry-only` and Bonn ATE, so
+    off (README, "Real time", 2026-12-04)."""
     seed_fundamental: float = valid(0.5, 0.0, 1.0)
     """When the depth test has its pose, F is fitted by least squares to the static matches that pose's own F
     explains within `ransac_px` (`epipolar.fundamental_from_seed`), if at least this fraction of them do;
@@ -224,7 +228,7 @@ def _relative_pose(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndar
         pose = _refine_from(X, uv, K, T_init, config)
         if pose is not None:
             return pose
-    got = sqpnp_ransac(X, uv, K, config.pnp_px, 300, 6)  # None: the depth test is skipped for this frame
+    got = sqpnp_ransac(X, uv, K, config.pnp_px, 300, 6, config.usac)  # None: no depth test for this frame
     return None if got is None else (got[0], got[1])
 
 
@@ -269,7 +273,7 @@ def _fundamental(p_prev, p_cur, pose, K, config) -> np.ndarray | None:
         F = fundamental_from_seed(p_prev, p_cur, seed, config.ransac_px, config.seed_fundamental)
         if F is not None:
             return F
-    return fundamental_ransac(p_prev, p_cur, config.ransac_px)
+    return fundamental_ransac(p_prev, p_cur, config.ransac_px, usac=config.usac)
 
 
 def _veto_pose(X, p_cur, has, K, T_init, config) -> np.ndarray:

@@ -62,11 +62,13 @@ def match_guided(uv_prev: np.ndarray, z_prev: np.ndarray, desc_prev: np.ndarray,
 
 
 def fundamental_ransac(p_prev: np.ndarray, p_cur: np.ndarray, threshold_px: float = 1.0,
-                       confidence: float = 0.999) -> np.ndarray | None:
-    """F (3x3) with x_cur^T F x_prev = 0 from pixel points (N, 2), RANSAC over eight-point solutions."""
+                       confidence: float = 0.999, usac: bool = False) -> np.ndarray | None:
+    """F (3x3) with x_cur^T F x_prev = 0 from pixel points (N, 2), RANSAC over eight-point solutions
+    (`usac`: OpenCV's USAC, with local optimisation and degeneracy checks)."""
     if len(p_prev) < 8:
         return None
-    F, _ = cv2.findFundamentalMat(p_prev.astype(np.float64), p_cur.astype(np.float64), cv2.FM_RANSAC,
+    method = cv2.USAC_DEFAULT if usac else cv2.FM_RANSAC
+    F, _ = cv2.findFundamentalMat(p_prev.astype(np.float64), p_cur.astype(np.float64), method,
                                   threshold_px, confidence)
     if F is None or F.shape != (3, 3):
         return None

@@ -27,13 +27,16 @@ def pnp_ransac(X_w: np.ndarray, uv: np.ndarray, K: np.ndarray, reproj_px: float 
 
 
 def sqpnp_ransac(X: np.ndarray, uv: np.ndarray, K: np.ndarray, reproj_px: float, iterations: int,
-                 min_inliers: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+                 min_inliers: int, usac: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(rvec, tvec, inlier indices) of the camera seeing (N,3) points `X` at (N,2) float64 pixels `uv`, by
     SQPnP-RANSAC (EPnP degenerates on planar scenes); None when it fails or keeps fewer than `min_inliers`.
-    SQPnP asserts on a sample whose points (nearly) coincide (seen on real frames): that is a failure too."""
+    SQPnP asserts on a sample whose points (nearly) coincide (seen on real frames): that is a failure too.
+    `usac`: OpenCV's USAC instead (P3P samples, local optimisation, SQPnP-free), far fewer hypotheses when
+    most points are outliers."""
+    flags = cv2.USAC_DEFAULT if usac else cv2.SOLVEPNP_SQPNP
     try:
         ok, rvec, tvec, inl = cv2.solvePnPRansac(X, uv, K, None, reprojectionError=reproj_px,
-                                                 iterationsCount=iterations, flags=cv2.SOLVEPNP_SQPNP)
+                                                 iterationsCount=iterations, flags=flags)
     except cv2.error:
         return None
     if not ok or inl is None or len(inl) < min_inliers:
