@@ -95,7 +95,9 @@ def main() -> None:
     ap.add_argument("--preset", default="full")
     ap.add_argument("--max-frames", type=int, default=300)
     ap.add_argument("--out", default=None, help="where runs go (default: a temp folder)")
+    ap.add_argument("--config", default=None, help="JSON overrides for every run (its `dense` keys are the methods')")
     args = ap.parse_args()
+    extra = json.loads(args.config) if args.config else {}
     base = Path(args.out or tempfile.mkdtemp(prefix="bench_map_"))
     rows = []
     for spec in args.sequence:
@@ -104,7 +106,8 @@ def main() -> None:
             run = base / f"{Path(seq_dir).name}_{method}"
             cmd = [str(ROOT / ".venv/bin/vtdslam"), "run", seq_dir, "--camera", camera, "--out", str(run),
                    "--preset", args.preset, "--max-frames", str(args.max_frames),
-                   "--config", json.dumps({"dense": {"method": method.split("+")[0], "carve": "+carve" in method}})]
+                   "--config", json.dumps({**extra, "dense": {**extra.get("dense", {}), "method": method.split("+")[0],
+                                                              "carve": "+carve" in method}})]
             subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
             rows.append((Path(seq_dir).name, method, check(Path(seq_dir), camera, run)))
     print(f"runs in {base}\n")

@@ -71,8 +71,8 @@ def test_restoration_on_demand_gives_the_same_outputs_and_restores_fewer_frames(
 
 def test_restored_features_restore_every_frame(people_seq, tmp_path):
     cfg = get_preset("full", {"restoration.restored_features": True})
-    # all 40 frames: the real-people MSNET (2026-12-04) marks the procedural people only in later frames (16
-    # restored for tracking); within the first 12 it marks none
+    # all 40 frames: the real-people MSNET (2026-12-04) marks the procedural people only in later frames (22
+    # restored for tracking, with one frame of mask memory); within the first 12 it marks none
     res = run_pipeline(Sequence(people_seq, PRESETS["tum3"]), cfg, None)
     m = res.metrics["restoration"]
     assert m["restored_frames"] > 0 and m["restored_for"] == {"tracking": m["restored_frames"]}
