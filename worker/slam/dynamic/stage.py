@@ -38,8 +38,9 @@ class SegmentationStageConfig:
     memory_frames: int = valid(1, 0, 30)
     """The network's mask of a frame also marks what it marked in the previous this-many frames (0 = off): a
     person the network misses in one frame stays marked, and geometry still judges every segment. 1 (chosen on
-    the development sequences: `no-restoration` mean 0.0377 -> 0.0311 m, 3 frames 0.0330) also held on AUG 1000
-    (0.0467 -> 0.0417) and on the real Bonn frames (0.0406 -> 0.0242; the teacher's masks 0.0186 -> 0.0182)."""
+    the development sequences: `no-restoration` mean 0.0377 -> 0.0311 m; 2 and 3 frames 0.0314, 0.0330) also
+    held on AUG 1000 (0.0467 -> 0.0417) and on the real Bonn frames (0.0406 -> 0.0242; the teacher's masks
+    0.0186 -> 0.0182)."""
 
     def __post_init__(self) -> None:
         if self.source not in ("network", "truth"):
