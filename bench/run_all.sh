@@ -65,6 +65,31 @@ $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-rest
     --config "$BAND15"
 $PY bench/bench_dynamic.py --sequence "$SHARED/data/bonn_crowd_dev:bonn" --presets no-restoration \
     --teacher "$SHARED/models/deeplabv3_257_mv_gpu.tflite" --config "$BAND15"
+echo "## mask memory (segmentation.memory_frames): 0, 1 (default), 2, 3 on the development means; 0 on AUG 1000 and Bonn"
+for n in 0 1 2 3; do
+    $PY bench/bench_dynamic.py "${SEEDS8[@]}" --sequence "$BENCH_DIR/synth:tum3" \
+        --sequence "$SHARED/data/7scenes_redkitchen:7scenes" --presets no-restoration --max-frames 300 --summary \
+        --config "{\"segmentation\": {\"memory_frames\": $n}}"
+done
+MEMORY0='{"segmentation": {"memory_frames": 0}}'
+$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-restoration --max-frames 1000
+$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-restoration --max-frames 1000 \
+    --config "$MEMORY0"
+$PY bench/bench_dynamic.py --sequence "$SHARED/data/bonn_crowd_dev:bonn" --presets no-restoration \
+    --teacher "$SHARED/models/deeplabv3_257_mv_gpu.tflite" --config "$MEMORY0"
+echo "## per-object threshold on the development means and Bonn (frame level is the default)"
+OBJECT='{"culling": {"culling": {"threshold": {"mode": "object"}}}}'
+$PY bench/bench_dynamic.py "${SEEDS8[@]}" --sequence "$BENCH_DIR/synth:tum3" \
+    --sequence "$SHARED/data/7scenes_redkitchen:7scenes" --presets no-restoration --max-frames 300 --summary \
+    --config "$OBJECT"
+$PY bench/bench_dynamic.py --sequence "$SHARED/data/bonn_crowd_dev:bonn" --presets geometry-only,no-restoration \
+    --teacher "$SHARED/models/deeplabv3_257_mv_gpu.tflite" --config "$OBJECT"
+echo "## dense map: people in map.ply, with and without the mask memory, and the demo sequence"
+$PY bench/bench_map.py --sequence "$BENCH_DIR/synth:tum3" --sequence "$BENCH_DIR/aug_s1:7scenes" --methods points+carve
+$PY bench/bench_map.py --sequence "$BENCH_DIR/synth:tum3" --sequence "$BENCH_DIR/aug_s1:7scenes" --methods points+carve \
+    --config "$MEMORY0"
+.venv/bin/vtdslam synth "$BENCH_DIR/demo" --frames 150 --people 2 > /dev/null
+$PY bench/bench_map.py --sequence "$BENCH_DIR/demo:tum3" --methods points,points+carve
 echo "## culling cost"; $PY bench/bench_culling.py "$BENCH_DIR/aug" --camera 7scenes --frames 60
 echo "## culling cost inside a run on real frames (Bonn, shipped MSNET)"; $PY bench/bench_culling.py "$SHARED/data/bonn_crowd_dev" --camera bonn --pipeline no-restoration
 echo "## restoration"; $PY bench/bench_inpainting.py "$BENCH_DIR/synth" "$BENCH_DIR/aug" --frames 15 --camera 7scenes --speed
