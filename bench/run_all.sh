@@ -54,36 +54,30 @@ $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets orb-onl
     --references
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-restoration --max-frames 1000 \
     --config "$ORACLE15"
+# A setting's effect (its --config JSON): on the development means (eight seeds, the synthetic room, static
+# redkitchen; 300 frames), on AUG 1000, and on Bonn with the teacher beside (evaluation only).
+dev_means() { $PY bench/bench_dynamic.py "${SEEDS8[@]}" --sequence "$BENCH_DIR/synth:tum3" \
+    --sequence "$SHARED/data/7scenes_redkitchen:7scenes" --presets no-restoration --max-frames 300 --summary \
+    --config "$1"; }
+aug1000() { $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-restoration \
+    --max-frames 1000 --config "$1"; }
+bonn() { $PY bench/bench_dynamic.py --sequence "$SHARED/data/bonn_crowd_dev:bonn" --presets "$2" \
+    --teacher "$SHARED/models/deeplabv3_257_mv_gpu.tflite" --config "$1"; }
 echo "## exclusion band with MSNET: 3 (default), 9, 15, 21 px on the development means; 15 px on AUG 1000 and Bonn"
-for px in 3 9 15 21; do
-    $PY bench/bench_dynamic.py "${SEEDS8[@]}" --sequence "$BENCH_DIR/synth:tum3" \
-        --sequence "$SHARED/data/7scenes_redkitchen:7scenes" --presets no-restoration --max-frames 300 --summary \
-        --config "{\"culling\": {\"culling\": {\"dilation_px\": $px}}}"
-done
+for px in 3 9 15 21; do dev_means "{\"culling\": {\"culling\": {\"dilation_px\": $px}}}"; done
 BAND15='{"culling": {"culling": {"dilation_px": 15}}}'
-$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-restoration --max-frames 1000 \
-    --config "$BAND15"
-$PY bench/bench_dynamic.py --sequence "$SHARED/data/bonn_crowd_dev:bonn" --presets no-restoration \
-    --teacher "$SHARED/models/deeplabv3_257_mv_gpu.tflite" --config "$BAND15"
-echo "## mask memory (segmentation.memory_frames): 0, 1 (default), 2, 3 on the development means; 0 on AUG 1000 and Bonn"
-for n in 0 1 2 3; do
-    $PY bench/bench_dynamic.py "${SEEDS8[@]}" --sequence "$BENCH_DIR/synth:tum3" \
-        --sequence "$SHARED/data/7scenes_redkitchen:7scenes" --presets no-restoration --max-frames 300 --summary \
-        --config "{\"segmentation\": {\"memory_frames\": $n}}"
-done
+aug1000 "$BAND15"
+bonn "$BAND15" no-restoration
+echo "## mask memory (segmentation.memory_frames): 0, 1 (default), 2, 3 on the development means; 0 and 1 on AUG 1000 and Bonn"
+for n in 0 1 2 3; do dev_means "{\"segmentation\": {\"memory_frames\": $n}}"; done
 MEMORY0='{"segmentation": {"memory_frames": 0}}'
-$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-restoration --max-frames 1000
-$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --presets no-restoration --max-frames 1000 \
-    --config "$MEMORY0"
-$PY bench/bench_dynamic.py --sequence "$SHARED/data/bonn_crowd_dev:bonn" --presets no-restoration \
-    --teacher "$SHARED/models/deeplabv3_257_mv_gpu.tflite" --config "$MEMORY0"
+aug1000 '{}'
+aug1000 "$MEMORY0"
+bonn "$MEMORY0" no-restoration
 echo "## per-object threshold on the development means and Bonn (frame level is the default)"
 OBJECT='{"culling": {"culling": {"threshold": {"mode": "object"}}}}'
-$PY bench/bench_dynamic.py "${SEEDS8[@]}" --sequence "$BENCH_DIR/synth:tum3" \
-    --sequence "$SHARED/data/7scenes_redkitchen:7scenes" --presets no-restoration --max-frames 300 --summary \
-    --config "$OBJECT"
-$PY bench/bench_dynamic.py --sequence "$SHARED/data/bonn_crowd_dev:bonn" --presets geometry-only,no-restoration \
-    --teacher "$SHARED/models/deeplabv3_257_mv_gpu.tflite" --config "$OBJECT"
+dev_means "$OBJECT"
+bonn "$OBJECT" geometry-only,no-restoration
 echo "## dense map: people in map.ply, with and without the mask memory, and the demo sequence"
 $PY bench/bench_map.py --sequence "$BENCH_DIR/synth:tum3" --sequence "$BENCH_DIR/aug_s1:7scenes" --methods points+carve
 $PY bench/bench_map.py --sequence "$BENCH_DIR/synth:tum3" --sequence "$BENCH_DIR/aug_s1:7scenes" --methods points+carve \

@@ -86,6 +86,14 @@ class SegmentationStage:
         ahead on another thread. None for the truth source (read in `process`: it needs the run's truth)."""
         return None if self.segmenter is None else self.segmenter.segment(frame.rgb).dynamic_mask()
 
+    def _remembered(self, mask: np.ndarray | None) -> np.ndarray | None:
+        """The network's `mask` (H, W) bool or'ed with the last `memory_frames` ones, which it joins."""
+        if mask is None or not self.recent.maxlen:
+            return mask
+        out = np.logical_or.reduce([mask, *self.recent])
+        self.recent.append(mask)
+        return out
+
     def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
         mask = inputs.prepared.get(self.name)
         if self.segmenter is None:
@@ -94,14 +102,7 @@ class SegmentationStage:
                                           path=ctx.sequence.root if ctx.sequence is not None else None)
             mask = ctx.truth.mask(frame.index)
         else:
-            if mask is None:
-                mask = self.prepare(frame)
-            assert isinstance(mask, np.ndarray)
-            if self.recent.maxlen:
-                marked = mask
-                for past in self.recent:
-                    mask = mask | past
-                self.recent.append(marked)
+            mask = self._remembered(mask if isinstance(mask, np.ndarray) else self.prepare(frame))
         assert isinstance(mask, np.ndarray)
         inputs.potentially_dynamic = mask
         inputs.info["potentially_dynamic_fraction"] = float(mask.mean())
