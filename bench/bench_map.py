@@ -7,7 +7,9 @@ only (the people columns read "-"). For every method the pipeline runs
 once (a spawned `vtdslam run`), then `map.ply` is checked two ways:
 
 - *people in the map*: every 3rd frame's truly moving pixels (truth masks) are back-projected with that
-  frame's measured depth at its ground-truth pose aligned onto the estimate (`groundtruth_aligned.txt`);
+  frame's measured depth at its ground-truth pose, brought into the map's world by a rigid fit of whole poses
+  (`bench_slam.align_by_poses`; before 2026-12-04 the position-only fit of `groundtruth_aligned.txt`, which
+  tilts the synthetic room's world by 4.4° and so counted floor under the walkers as people);
   the share of map points within 5 cm of any of them is reported. Static surfaces a person touched (the
   floor under a foot, a wall walked along) count there too, so a second column keeps only those points that
   are also more than 5 cm from the true static scene (the truth's background depth of the same frames):
@@ -42,16 +44,33 @@ def _backproject(depth: np.ndarray, keep: np.ndarray, K: np.ndarray, T_WC: np.nd
     return Xc @ T_WC[:3, :3].T + T_WC[:3, 3]
 
 
-def truth_points(seq, truth, aligned: np.ndarray, every: int = 3, stride: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """World points (estimate frame) of every `every`-th frame: the truly moving pixels (N,3), and the
-    static scene behind everything (its true background depth) (M,3)."""
+def gt_in_map_world(seq, traj) -> dict[int, np.ndarray]:
+    """Frame index -> 4x4 ground-truth T_WC in the estimate's (the map's) world, for the frames of the run
+    `traj` (from frame 0) that have a ground-truth pose; rigid fit of whole poses (see the module doc)."""
+    from bench_slam import align_by_poses
+
+    idx, gt = seq.groundtruth_for_frames()
+    keep = idx < len(traj)
+    idx, gt = idx[keep], gt[keep]
+    R, t = align_by_poses(gt, traj.poses[idx])
+    A_inv = np.eye(4)  # gt world -> estimate world
+    A_inv[:3, :3], A_inv[:3, 3] = R.T, -R.T @ t
+    return {int(i): A_inv @ T for i, T in zip(idx, gt)}
+
+
+def truth_points(seq, truth, poses: dict[int, np.ndarray], every: int = 3,
+                 stride: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """World points (`poses`' world) of every `every`-th frame with a pose: the truly moving pixels (N,3), and
+    the static scene behind everything (its true background depth) (M,3)."""
     K = seq.camera.K
     people, static = [], []
-    for i in range(0, min(len(aligned), len(truth), len(seq)), every):
+    for i in range(0, min(len(truth), len(seq)), every):
+        if i not in poses:
+            continue
         mask = truth.mask(i)[::stride, ::stride]
-        people.append(_backproject(seq[i].depth[::stride, ::stride], mask, K, aligned[i], stride))
+        people.append(_backproject(seq[i].depth[::stride, ::stride], mask, K, poses[i], stride))
         bg = truth.background_depth(i)[::2 * stride, ::2 * stride]
-        static.append(_backproject(bg, np.ones(bg.shape, bool), K, aligned[i], 2 * stride))
+        static.append(_backproject(bg, np.ones(bg.shape, bool), K, poses[i], 2 * stride))
     return np.vstack(people), np.vstack(static)
 
 
@@ -68,12 +87,11 @@ def check(seq_dir: Path, camera: str, run: Path) -> dict:
     seq = Sequence(seq_dir, load_camera_file(seq_dir) or parse_camera(camera))
     truth = load_truth(seq_dir)
     xyz, _ = read_ply(run / "map.ply")
-    aligned = read_tum_trajectory(run / "groundtruth_aligned.txt").poses
     traj = read_tum_trajectory(run / "trajectory.txt")
     X = xyz.astype(np.float64)
     near = off_static = None
     if truth is not None:
-        people, static = truth_points(seq, truth, aligned)
+        people, static = truth_points(seq, truth, gt_in_map_world(seq, traj))
         near = cKDTree(people).query(X, k=1)[0] < NEAR_M if len(people) else np.zeros(len(xyz), bool)
         off_static = cKDTree(static).query(X, k=1)[0] > NEAR_M
     kf_stamps = read_tum_trajectory(run / "keyframes.txt").timestamps
