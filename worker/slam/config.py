@@ -176,9 +176,14 @@ class DenseConfig:
     tsdf_trunc_voxels: float = valid(4.0, 1.0, 100.0)
     """TSDF truncation band in voxels (`method: tsdf`)."""
     carve: bool = True
-    """Drop map points that keyframes' measured depth sees through more often than it sees them: what moved
-    away after it entered the map, e.g. a person segmentation missed (`worker.slam.mapping.carve`; README
-    Results, "Dense map", for why it is on)."""
+    """Drop map points that keyframes' measured depth sees through: what was there only for a while, e.g. a
+    person segmentation missed (`worker.slam.mapping.carve`; README Results, "Dense map", for why it is on)."""
+    carve_min_through: int = valid(2, 1, 1000)
+    """Keyframes that must see through a point before it is dropped (one is not enough: a single bad depth
+    frame or pose would carve static surfaces)."""
+    carve_majority: bool = False
+    """Also require that the point was seen through more often than seen (the rule until 2026-12-04): keeps
+    people who stay in view for many keyframes, so off (README, "Dense map")."""
 
 
 @dataclass

@@ -1,11 +1,12 @@
 """Free-space carving of the dense map: drop points that the keyframes' measured depth sees through.
 
 Why: segmentation misses parts of people (and anything else that moves), and a missed piece enters the map
-at the moment it was seen. Every other keyframe that looks at the same place *after it left* measures the
-static surface behind it, i.e. free space where the map has a point. A static surface is never seen through
-(only occluded, which is a measurement in front of it), so a point seen through more often than it is seen
-was a passer-by. The raw sensor depth is used, masked regions included: a mask says "something that may
-move is here", never "the space in front of it is not free".
+at the moment it was seen. Every other keyframe that looks at the same place *before it came or after it left*
+measures the static surface behind it, i.e. free space where the map has a point. A static surface is never
+seen through (only occluded, which is a measurement in front of it), so a point that two keyframes saw
+through was a passer-by, however often others saw it: a person who lingers is seen by many keyframes and
+seen through only by those before or after. The raw sensor depth is used, masked regions included: a mask
+says "something that may move is here", never "the space in front of it is not free".
 """
 from __future__ import annotations
 
@@ -49,11 +50,13 @@ def visibility_votes(xyz_t: np.ndarray, kf: KeyFrame, K_small: np.ndarray, rel_t
 
 
 def carve(xyz: np.ndarray, rgb: np.ndarray, keyframes: list[KeyFrame], K: np.ndarray, stride: int,
-          rel_tol: float = 0.03, min_tol_m: float = 0.05, min_through: int = 2) -> tuple[np.ndarray, np.ndarray]:
+          rel_tol: float = 0.03, min_tol_m: float = 0.05, min_through: int = 2,
+          majority: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The map `xyz` (M,3) float32 world points with colours `rgb` (M,3) uint8, less the points that at least
-    `min_through` keyframes saw through and that were seen through more often than seen. `K` 3x3 full-image
-    intrinsics; the keyframes' `measured_small` holds every `stride`-th pixel (pinhole: distortion is below
-    the tolerance at this stride)."""
+    `min_through` keyframes saw through (`majority`: and that were seen through more often than seen, the rule
+    until 2026-12-04, which kept a person who stayed in view for more keyframes than saw the place free).
+    `K` 3x3 full-image intrinsics; the keyframes' `measured_small` holds every `stride`-th pixel (pinhole:
+    distortion is below the tolerance at this stride)."""
     kfs = [kf for kf in keyframes if kf.measured_small is not None]
     if not kfs or len(xyz) == 0:
         return xyz, rgb
@@ -66,5 +69,8 @@ def carve(xyz: np.ndarray, rgb: np.ndarray, keyframes: list[KeyFrame], K: np.nda
         through, seen = visibility_votes(X_t, kf, K_small, rel_tol, min_tol_m)
         n_through[through] += 1  # indices are unique per keyframe
         n_seen[seen] += 1
-    keep = ~((n_through >= min_through) & (n_through > n_seen))
+    carved = n_through >= min_through
+    if majority:
+        carved &= n_through > n_seen
+    keep = ~carved
     return xyz[keep], rgb[keep]

@@ -23,4 +23,6 @@ def build_dense_map(keyframes: list[KeyFrame], K: np.ndarray, dist: np.ndarray |
                              cfg.tsdf_trunc_voxels)
     else:
         raise ConfigError(f"dense.method must be 'points' or 'tsdf', not {cfg.method!r}")
-    return carve(xyz, rgb, keyframes, K, cfg.stride) if cfg.carve else (xyz, rgb)
+    if not cfg.carve:
+        return xyz, rgb
+    return carve(xyz, rgb, keyframes, K, cfg.stride, min_through=cfg.carve_min_through, majority=cfg.carve_majority)
