@@ -84,6 +84,15 @@ $PY bench/bench_map.py --sequence "$BENCH_DIR/synth:tum3" --sequence "$BENCH_DIR
     --config "$MEMORY0"
 .venv/bin/vtdslam synth "$BENCH_DIR/demo" --frames 150 --people 2 > /dev/null
 $PY bench/bench_map.py --sequence "$BENCH_DIR/demo:tum3" --methods points,points+carve
+echo "## carving rule: two views through (default) against the majority rule, truth placed by whole poses"
+.venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
+    "$BENCH_DIR/aug_s0_300" --frames 300 --seed 0 > /dev/null
+SEQ0="$BENCH_DIR/aug_s0_300:7scenes"
+for extra in '{}' '{"dense": {"carve_majority": true}}'; do
+    $PY bench/bench_map.py --sequence "$BENCH_DIR/synth:tum3" --sequence "$BENCH_DIR/demo:tum3" \
+        --sequence "$BENCH_DIR/aug_s1:7scenes" --sequence "$SEQ0" --sequence "$SHARED/data/7scenes_redkitchen:7scenes" \
+        --methods points+carve --config "$extra"
+done
 echo "## culling cost"; $PY bench/bench_culling.py "$BENCH_DIR/aug" --camera 7scenes --frames 60
 echo "## culling cost inside a run on real frames (Bonn, shipped MSNET)"; $PY bench/bench_culling.py "$SHARED/data/bonn_crowd_dev" --camera bonn --pipeline no-restoration
 echo "## restoration"; $PY bench/bench_inpainting.py "$BENCH_DIR/synth" "$BENCH_DIR/aug" --frames 15 --camera 7scenes --speed
