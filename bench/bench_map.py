@@ -14,7 +14,14 @@ once (a spawned `vtdslam run`), then `map.ply` is checked two ways:
   floor under a foot, a wall walked along) count there too, so a second column keeps only those points that
   are also more than 5 cm from the true static scene (the truth's background depth of the same frames):
   what is really a person in the map;
-- *accuracy*: bench_slam's check of map points against held-out frames' measured depth at their GT poses.
+- *people in the map, real footage* (`--references TEACHER`, for sequences without truth such as
+  ../shared/data/bonn_crowd_dev, evaluation only): every `--reference-every`-th frame's person pixels by the
+  teacher (`reference_masks`: the 513 DeepLabV3 of bench_msnet, border band ignored, cached outside the
+  repository) back-projected with the measured depth at the run's *estimated* poses (the map's own frame; no
+  ground-truth convention involved); only the "near a person" column, as there is no true static scene;
+- *accuracy*: bench_slam's check of map points against held-out frames' measured depth at their GT poses (and,
+  last column, at the estimated poses: the map's agreement with the frames it did not fuse, free of any
+  ground-truth convention such as Bonn's marker-to-camera offset).
 
 Benchmarks print figures; they assert nothing.
 """
@@ -74,7 +81,29 @@ def truth_points(seq, truth, poses: dict[int, np.ndarray], every: int = 3,
     return np.vstack(people), np.vstack(static)
 
 
-def check(seq_dir: Path, camera: str, run: Path) -> dict:
+def reference_people(seq, traj, teacher: Path, every: int, cache: Path, stride: int = 2,
+                     erode_px: int = 8) -> np.ndarray:
+    """(N,3) points, in the run's world, of the teacher's person pixels of every `every`-th tracked frame,
+    at the estimated poses (see the module doc). The masks are eroded by `erode_px` first: a teacher's mask
+    spills a few pixels past the silhouette, and there the depth is the wall behind, which would count the
+    walls people walked past as people."""
+    import cv2
+
+    from worker.slam.segmentation.reference_masks import ReferenceRecipe, reference_masks
+
+    frames = list(range(0, min(len(traj), len(seq)), every))
+    masks = reference_masks([seq.frames[i].rgb_path for i in frames], ReferenceRecipe(teacher), cache)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * erode_px + 1, 2 * erode_px + 1))
+    pts = []
+    for i, m in zip(frames, masks):
+        ref = np.asarray(cv2.imread(str(m), cv2.IMREAD_UNCHANGED))
+        person = cv2.erode((ref == 1).astype(np.uint8), disc) > 0
+        pts.append(_backproject(seq[i].depth[::stride, ::stride], person[::stride, ::stride], seq.camera.K,
+                                traj.poses[i], stride))
+    return np.vstack(pts) if pts else np.zeros((0, 3))
+
+
+def check(seq_dir: Path, camera: str, run: Path, references: tuple[Path, int, Path] | None = None) -> dict:
     from bench_slam import map_check
     from scipy.spatial import cKDTree
 
@@ -94,12 +123,15 @@ def check(seq_dir: Path, camera: str, run: Path) -> dict:
         people, static = truth_points(seq, truth, gt_in_map_world(seq, traj))
         near = cKDTree(people).query(X, k=1)[0] < NEAR_M if len(people) else np.zeros(len(xyz), bool)
         off_static = cKDTree(static).query(X, k=1)[0] > NEAR_M
+    elif references is not None:
+        people = reference_people(seq, traj, *references)
+        near = cKDTree(people).query(X, k=1)[0] < NEAR_M if len(people) else np.zeros(len(xyz), bool)
     kf_stamps = read_tum_trajectory(run / "keyframes.txt").timestamps
     kf_frames = {int(i) for i in np.flatnonzero(np.isin(np.round(traj.timestamps, 6), np.round(kf_stamps, 6)))}
     metrics = json.loads((run / "metrics.json").read_text())
-    known = near is not None and off_static is not None and len(xyz) > 0
-    out = {"map_points": int(len(xyz)), "near_people": float(near.mean()) if known else None,  # type: ignore[union-attr]
-           "on_people": float((near & off_static).mean()) if known else None,  # type: ignore[operator]
+    near_share = float(near.mean()) if near is not None and len(xyz) else None
+    on_share = float((near & off_static).mean()) if near is not None and off_static is not None and len(xyz) else None
+    out = {"map_points": int(len(xyz)), "near_people": near_share, "on_people": on_share,
            "ate": (metrics.get("ate") or {}).get("rmse"), "dense_ms": (metrics.get("timings_ms") or {}).get("dense")}
     out.update(map_check(seq, traj, xyz, kf_frames, 0))
     return out
@@ -114,7 +146,16 @@ def main() -> None:
     ap.add_argument("--max-frames", type=int, default=300)
     ap.add_argument("--out", default=None, help="where runs go (default: a temp folder)")
     ap.add_argument("--config", default=None, help="JSON overrides for every run (its `dense` keys are the methods')")
+    ap.add_argument("--references", type=Path, default=None, metavar="TEACHER",
+                    help="people in the map of sequences without truth, from this teacher's person masks "
+                         "(e.g. ../shared/models/deeplabv3_mnv2_pascal_quant.tflite)")
+    ap.add_argument("--reference-every", type=int, default=5, help="every n-th frame gets a reference mask")
+    ap.add_argument("--cache", type=Path, default=Path("/tmp/vtd_map_refs"),
+                    help="where the reference masks are made once (never inside the repo)")
     args = ap.parse_args()
+    if args.cache.resolve().is_relative_to(ROOT):
+        ap.error("--cache must be outside the repository (reference masks are never committed)")
+    refs = (args.references, args.reference_every, args.cache) if args.references else None
     extra = json.loads(args.config) if args.config else {}
     base = Path(args.out or tempfile.mkdtemp(prefix="bench_map_"))
     rows = []
@@ -127,18 +168,21 @@ def main() -> None:
                    "--config", json.dumps({**extra, "dense": {**extra.get("dense", {}), "method": method.split("+")[0],
                                                               "carve": "+carve" in method}})]
             subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-            rows.append((Path(seq_dir).name, method, check(Path(seq_dir), camera, run)))
+            rows.append((Path(seq_dir).name, method, check(Path(seq_dir), camera, run, refs)))
     print(f"runs in {base}\n")
     print(f"| sequence | dense map | points | within {NEAR_M * 100:.0f} cm of a person | of those, off the static "
-          "scene | median to held-out depth, GT poses (m) | within 5 cm | ATE (m) | dense ms |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "scene | median to held-out depth, GT poses (m) | within 5 cm | ATE (m) | dense ms | median, estimated "
+          "poses (m) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name, method, r in rows:
         share = "-" if r["near_people"] is None else f"{100 * r['near_people']:.2f} %"
         on = "-" if r["on_people"] is None else f"{100 * r['on_people']:.2f} %"
         med = "-" if r.get("median_m_gt") is None else f"{r['median_m_gt']:.4f}"
         w5 = "-" if r.get("within_5cm_gt") is None else f"{r['within_5cm_gt']:.3f}"
         ate = "-" if r["ate"] is None else f"{r['ate']:.4f}"
-        print(f"| {name} | {method} | {r['map_points']} | {share} | {on} | {med} | {w5} | {ate} | {r['dense_ms']} |")
+        est = "-" if r.get("median_m_est") is None else f"{r['median_m_est']:.4f}"
+        print(f"| {name} | {method} | {r['map_points']} | {share} | {on} | {med} | {w5} | {ate} | {r['dense_ms']} | "
+              f"{est} |")
 
 
 if __name__ == "__main__":
