@@ -178,9 +178,14 @@ class DenseConfig:
     carve: bool = True
     """Drop map points that keyframes' measured depth sees through: what was there only for a while, e.g. a
     person segmentation missed (`worker.slam.mapping.carve`; README Results, "Dense map", for why it is on)."""
-    carve_min_through: int = valid(2, 1, 1000)
-    """Keyframes that must see through a point before it is dropped (one is not enough: a single bad depth
-    frame or pose would carve static surfaces)."""
+    carve_every: int = valid(3, 0, 1000)
+    """Every n-th tracked frame's measured depth votes in carving, at its final pose (0: the keyframes only):
+    the frames between keyframes see behind people that few keyframes do (README, "Dense map")."""
+    carve_max_views: int = valid(1000, 1, 100_000)
+    """At most this many frames kept for carving (77 kB each at 640x480, stride 4); a longer run thins them."""
+    carve_min_through: int = valid(3, 1, 1000)
+    """Views that must see through a point before it is dropped (one is not enough: a single bad depth frame
+    or pose would carve static surfaces)."""
     carve_majority: bool = False
     """Also require that the point was seen through more often than seen (the rule until 2026-12-04): keeps
     people who stay in view for many keyframes, so off (README, "Dense map")."""

@@ -46,6 +46,7 @@ from worker.slam.io.sequence import Frame, Sequence
 from worker.slam.io.trajectory import Trajectory, write_tum_trajectory
 from worker.slam.io.work_behind import WorkBehind
 from worker.slam.map.map import Map
+from worker.slam.mapping.carve import FrameViews
 from worker.slam.mapping.dense_map import build_dense_map
 from worker.slam.mapping.local_mapping import LocalMapper
 from worker.slam.mapping.loop_closure import LoopCloser
@@ -134,6 +135,9 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     stage_info: dict[str, list[float]] = defaultdict(list)
     cpu_tracking: list[float] = []  # CPU seconds (all threads): comparable when the machine is shared
     overlapped: set[str] = set()  # stages whose work ran ahead on another thread
+    dense = config.dense
+    carve_frames = FrameViews(dense.carve_every if dense.enabled and dense.carve else 0, dense.stride,
+                              dense.carve_max_views)
     t_loop = time.perf_counter()
     # frames after the first are decoded on a background thread while this one runs the stages; the reader
     # queues each decoded frame's `prepare` work on a second thread (left by `with` before the reader stops)
@@ -180,6 +184,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
                     t = timer("loop_closure", t)
                 tracker.on_map_updated(res)
             stamps[k], tracked[k] = frame.timestamp, res.ok
+            carve_frames.offer(k, frame.depth)
             row = {"features": len(res.feats), "matched_points": int(np.sum(res.point_ids >= 0)),
                    **{k2: v for k2, v in inputs.info.items() if isinstance(v, (int, float))}}
             frame_info.append(row)
@@ -212,7 +217,8 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     cloud = None
     if config.dense.enabled and len(smap):
         cloud = build_dense_map(smap.keyframes, camera.K,
-                                np.asarray(camera.dist) if camera.has_distortion else None, config.dense)
+                                np.asarray(camera.dist) if camera.has_distortion else None, config.dense,
+                                carve_frames.views(traj.poses, tracked) if carve_frames.every else None)
         timer("dense", t)
     metrics = {
         "frames": total, "tracked": int(tracked.sum()), "lost": int((~tracked).sum()),
