@@ -84,16 +84,20 @@ $PY bench/bench_map.py --sequence "$BENCH_DIR/synth:tum3" --sequence "$BENCH_DIR
     --config "$MEMORY0"
 .venv/bin/vtdslam synth "$BENCH_DIR/demo" --frames 150 --people 2 > /dev/null
 $PY bench/bench_map.py --sequence "$BENCH_DIR/demo:tum3" --methods points,points+carve
-echo "## carving rule: two views through (default) against the majority rule, truth placed by whole poses;"
+echo "## carving: every 3rd frame, three views (default) against keyframes with two views and the majority rule;"
 echo "## on Bonn (evaluation only) people from the 513 teacher's masks"
 BONN_MAP=(--sequence "$SHARED/data/bonn_crowd_dev:bonn" --max-frames 314
           --references "$SHARED/models/deeplabv3_mnv2_pascal_quant.tflite")
 $PY bench/bench_map.py "${BONN_MAP[@]}" --methods points,points+carve
-$PY bench/bench_map.py "${BONN_MAP[@]}" --methods points+carve --config '{"dense": {"carve_majority": true}}'
+KF_TWO='{"dense": {"carve_every": 0, "carve_min_through": 2}}'
+KF_MAJORITY='{"dense": {"carve_every": 0, "carve_min_through": 2, "carve_majority": true}}'
+for extra in "$KF_TWO" "$KF_MAJORITY"; do
+    $PY bench/bench_map.py "${BONN_MAP[@]}" --methods points+carve --config "$extra"
+done
 .venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
     "$BENCH_DIR/aug_s0_300" --frames 300 --seed 0 > /dev/null
 SEQ0="$BENCH_DIR/aug_s0_300:7scenes"
-for extra in '{}' '{"dense": {"carve_majority": true}}'; do
+for extra in '{}' "$KF_TWO" "$KF_MAJORITY"; do
     $PY bench/bench_map.py --sequence "$BENCH_DIR/synth:tum3" --sequence "$BENCH_DIR/demo:tum3" \
         --sequence "$BENCH_DIR/aug_s1:7scenes" --sequence "$SEQ0" --sequence "$SHARED/data/7scenes_redkitchen:7scenes" \
         --methods points+carve --config "$extra"
