@@ -176,7 +176,7 @@ class DenseConfig:
     tsdf_trunc_voxels: float = valid(4.0, 1.0, 100.0)
     """TSDF truncation band in voxels (`method: tsdf`)."""
     carve: bool = True
-    """Drop map points that keyframes' measured depth sees through: what was there only for a while, e.g. a
+    """Drop map points that other frames' measured depth sees through: what was there only for a while, e.g. a
     person segmentation missed (`worker.slam.mapping.carve`; README Results, "Dense map", for why it is on)."""
     carve_every: int = valid(3, 0, 1000)
     """Every n-th tracked frame's measured depth votes in carving, at its final pose (0: the keyframes only):

@@ -1,12 +1,12 @@
 """Free-space carving of the dense map: drop points that the keyframes' measured depth sees through.
 
 Why: segmentation misses parts of people (and anything else that moves), and a missed piece enters the map
-at the moment it was seen. Every other keyframe that looks at the same place *before it came or after it left*
+at the moment it was seen. Every other view that looks at the same place *before it came or after it left*
 measures the static surface behind it, i.e. free space where the map has a point. A static surface is never
-seen through (only occluded, which is a measurement in front of it), so a point that two keyframes saw
-through was a passer-by, however often others saw it: a person who lingers is seen by many keyframes and
-seen through only by those before or after. The raw sensor depth is used, masked regions included: a mask
-says "something that may move is here", never "the space in front of it is not free".
+seen through (only occluded, which is a measurement in front of it), so a point that a few views saw through
+was a passer-by, however often others saw it: a person who lingers is seen by many views and seen through
+only by those before or after. The raw sensor depth is used, masked regions included: a mask says "something
+that may move is here", never "the space in front of it is not free".
 
 The views that vote are every n-th tracked frame at its final pose (`FrameViews`), or the keyframes: a person
 pasted or standing where few keyframes look behind it is seen through by the frames in between.
@@ -50,6 +50,7 @@ class FrameViews:
 
 
 def keyframe_views(keyframes: list[KeyFrame]) -> list[View]:
+    """The keyframes as views (those that keep their measured depth)."""
     return [(kf.T_WC, kf.measured_small) for kf in keyframes if kf.measured_small is not None]
 
 
