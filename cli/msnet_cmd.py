@@ -14,6 +14,7 @@ def register(app: typer.Typer) -> None:
     app.command("train-msnet")(train_command)
     app.command("eval-msnet")(eval_command)
     app.command("export-msnet")(export_command)
+    app.command("compress-msnet")(compress_command)
 
 
 def _shared_default() -> str:
@@ -75,6 +76,61 @@ def export_command(
     except ConfigError as exc:
         raise typer.BadParameter(exc.message) from exc
     typer.echo(f"weights: {dest}" + (f" (potentially dynamic: {', '.join(classes)})" if classes else ""))
+
+
+def compress_command(
+    src: Annotated[Path, typer.Argument(help="A checkpoint with the dense refinement (e.g. the shipped "
+                                             "worker/slam/segmentation/weights/msnet_default.pt).")],
+    dest: Annotated[Path, typer.Argument(help="Where to write the factorised checkpoint.")],
+    rank: Annotated[int, typer.Option(help="Rank of the factorised refinement (1-9; 1 is cheapest).")] = 1,
+    recipe: Annotated[str, typer.Option(help="Training preset whose image mixture (and validation split) is "
+                                             "used; its teachers are not needed.")] = "cpu-real-tum-ft",
+    samples: Annotated[int, typer.Option(help="Mixture samples cached (1/8 held back for the agreement).")] = 1200,
+    local_steps: Annotated[int, typer.Option(help="Steps fitting the layer's output.")] = 1000,
+    steps: Annotated[int, typer.Option(help="Then steps fitting the logits.")] = 2000,
+    threads: Annotated[int, typer.Option(help="CPU threads (0 = the library default).")] = 0,
+    shared_dir: Annotated[str | None, typer.Option(help="Shared data folder (default $VTD_SHARED_DIR or "
+                                                         "../shared).")] = None,
+) -> None:
+    """Make MSNET cheaper: factorise its 3x3 refinement and distil it from the dense network (CPU, minutes)."""
+    from dataclasses import replace
+
+    import torch
+
+    from worker.slam.errors import ConfigError
+    from worker.slam.segmentation.msnet.checkpoint import load_model, save_model
+    from worker.slam.segmentation.train.compress import CompressConfig, distil_refine, factorise_refine, mixture_images
+    from worker.slam.segmentation.train.config import load_train_config
+    from worker.slam.segmentation.train.data import build_training_data
+    from worker.slam.segmentation.train.trainer import validate
+
+    try:
+        cfg = CompressConfig(rank=rank, samples=samples, local_steps=local_steps, steps=steps)
+        teacher, meta = load_model(src)
+        train_cfg = load_train_config(recipe, shared_dir=shared_dir or _shared_default())
+        # the mixture's images only: no teacher labels are needed, so none are computed
+        train_cfg = replace(train_cfg, teacher=None, extra_teachers=(), target_frames=(), bn_extra_frames=(),
+                            model=teacher.cfg)
+        student = factorise_refine(teacher, cfg.rank)
+    except ConfigError as exc:
+        raise typer.BadParameter(exc.message) from exc
+    if threads:
+        torch.set_num_threads(threads)
+    data = build_training_data(train_cfg)
+    typer.echo(f"caching {cfg.samples} samples of the {recipe} mixture ...")
+    result = distil_refine(teacher, student, mixture_images(data.train, cfg.samples), cfg, progress=typer.echo)
+    person = teacher.cfg.classes.index("person") if "person" in teacher.cfg.classes else None
+    val = {}
+    if data.selection and person is not None:
+        for name, model in (("dense", teacher), ("factorised", student)):
+            iou = validate(model, data.selection, torch.device("cpu"))["val_iou"]
+            val[name] = iou[teacher.cfg.classes[person]]
+        teacher.eval(), student.eval()  # `validate` leaves a model in training mode
+    record = {**result.to_dict(), "val_person_iou": val, "rank": cfg.rank, "samples": cfg.samples,
+              "local_steps": cfg.local_steps, "steps": cfg.steps, "recipe": recipe}
+    save_model(dest, student.eval(), {**meta, "compressed_from": str(src), "compress": record})
+    typer.echo(json.dumps(record, indent=2))
+    typer.echo(f"weights: {dest}")
 
 
 def eval_command(

@@ -18,6 +18,32 @@ def conv_bn_act(c_in: int, c_out: int, kernel: int = 3, stride: int = 1) -> nn.S
     )
 
 
+class Repeat(nn.Module):
+    """(B, C, H, W) -> (B, n*C, H, W): the channels repeated n times (channel j*C + c is input channel c)."""
+
+    def __init__(self, n: int) -> None:
+        super().__init__()
+        self.n = n
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.cat([x] * self.n, dim=1)
+
+
+def separable_conv_bn_act(c_in: int, c_out: int, rank: int) -> nn.Sequential:
+    """A 3x3 conv factorised to rank `rank` per input channel: depthwise 3x3 over `rank` copies of the channels,
+    then a 1x1 mixing them (+ BatchNorm + ReLU). The dense kernel W[o, i] (3x3) becomes
+    sum_r P[o, r*C + i] * D[r*C + i]. The copies are explicit because PyTorch's depthwise conv with a channel
+    multiplier took 10x longer on CPU than a plain one over twice the channels."""
+    c_mid = c_in * rank
+    return nn.Sequential(
+        *([Repeat(rank)] if rank > 1 else []),
+        nn.Conv2d(c_mid, c_mid, 3, 1, 1, groups=c_mid, bias=False),
+        nn.Conv2d(c_mid, c_out, 1, bias=False),
+        nn.BatchNorm2d(c_out),
+        nn.ReLU(inplace=True),
+    )
+
+
 def fold_batchnorm(model: nn.Module) -> nn.Module:
     """An eval-mode copy of `model` with every BatchNorm2d that follows a Conv2d in a Sequential folded into the
     conv's weights and bias (left as Identity): the same function up to float rounding, one pass fewer per

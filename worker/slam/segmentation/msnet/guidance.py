@@ -6,7 +6,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from worker.slam.segmentation.msnet.blocks import conv_bn_act
+from worker.slam.segmentation.msnet.blocks import conv_bn_act, separable_conv_bn_act
 
 
 class ChannelAttention(nn.Module):
@@ -35,15 +35,16 @@ class SpatialAttention(nn.Module):
 
 
 class FeatureGuidance(nn.Module):
-    """(enhanced C5 (B, D, H/8, W/8), C1 (B, S, H/4, W/4)) -> pixel embedding (B, D, H/4, W/4)."""
+    """(enhanced C5 (B, D, H/8, W/8), C1 (B, S, H/4, W/4)) -> pixel embedding (B, D, H/4, W/4).
+    `refine_rank`: 0 = dense 3x3 refinement, r >= 1 = its rank-r separable stand-in (`MsnetConfig.refine_rank`)."""
 
-    def __init__(self, dim: int, skip_channels: int) -> None:
+    def __init__(self, dim: int, skip_channels: int, refine_rank: int = 0) -> None:
         super().__init__()
         self.channel = ChannelAttention(dim)
         self.spatial = SpatialAttention()
         self.merge = conv_bn_act(2 * dim, dim, 1)
         self.skip = conv_bn_act(skip_channels, dim, 1)
-        self.refine = conv_bn_act(dim, dim, 3)
+        self.refine = separable_conv_bn_act(dim, dim, refine_rank) if refine_rank else conv_bn_act(dim, dim, 3)
         self.embed = nn.Conv2d(dim, dim, 1)
 
     def forward(self, feat: torch.Tensor, c1: torch.Tensor) -> torch.Tensor:

@@ -35,7 +35,7 @@ class MSNet(nn.Module):
         self.cfg = cfg
         self.backbone = DualPyramidBackbone(cfg)
         self.enhancement = FeatureEnhancement(cfg)
-        self.guidance = FeatureGuidance(cfg.embed_dim, cfg.stem_channels)
+        self.guidance = FeatureGuidance(cfg.embed_dim, cfg.stem_channels, cfg.refine_rank)
         self.head = ClassMaskHead()
         # ImageNet statistics: inputs are uint8-derived RGB in [0, 1].
         self.register_buffer("mean", torch.tensor([0.485, 0.456, 0.406]).view(1, 3, 1, 1), persistent=False)
