@@ -108,5 +108,11 @@ echo "## restoration"; $PY bench/bench_inpainting.py "$BENCH_DIR/synth" "$BENCH_
 echo "## MSNET"
 $PY bench/bench_msnet.py --threads 1 --sequence "$BENCH_DIR/aug" \
     $(for seed in 1 2 3 4; do echo --sequence "$BENCH_DIR/aug_s$seed"; done)
+echo "## MSNET's refinement factorised: ranks 1 and 2 from the dense checkpoint of git 263e745 (MODEL_CARD.md)"
+git show 263e745:worker/slam/segmentation/weights/msnet_default.pt > "$BENCH_DIR/msnet_dense.pt"
+for rank in 1 2; do
+    .venv/bin/vtdslam compress-msnet "$BENCH_DIR/msnet_dense.pt" "$BENCH_DIR/msnet_r$rank.pt" --rank "$rank"
+done
+for ckpt in dense r1 r2; do $PY bench/bench_msnet.py --threads 1 --checkpoint "$BENCH_DIR/msnet_$ckpt.pt"; done
 echo "## generators"; $PY bench/bench_generators.py --frames 90
 echo "## upload"; $PY bench/bench_upload.py
