@@ -119,13 +119,10 @@ def compress_command(
     data = build_training_data(train_cfg)
     typer.echo(f"caching {cfg.samples} samples of the {recipe} mixture ...")
     result = distil_refine(teacher, student, mixture_images(data.train, cfg.samples), cfg, progress=typer.echo)
-    person = teacher.cfg.classes.index("person") if "person" in teacher.cfg.classes else None
-    val = {}
-    if data.selection and person is not None:
+    val = {}  # person IoU on the recipe's validation split (selection data, never a test image)
+    if data.selection and "person" in teacher.cfg.classes:
         for name, model in (("dense", teacher), ("factorised", student)):
-            iou = validate(model, data.selection, torch.device("cpu"))["val_iou"]
-            val[name] = iou[teacher.cfg.classes[person]]
-        teacher.eval(), student.eval()  # `validate` leaves a model in training mode
+            val[name] = validate(model, data.selection, torch.device("cpu"))["val_iou"]["person"]
     record = {**result.to_dict(), "val_person_iou": val, "rank": cfg.rank, "samples": cfg.samples,
               "local_steps": cfg.local_steps, "steps": cfg.steps, "recipe": recipe}
     save_model(dest, student.eval(), {**meta, "compressed_from": str(src), "compress": record})

@@ -36,8 +36,8 @@ class MsnetConfig:
     dropout: float = 0.1
     """Dropout in the Transformer blocks (the paper trains with 0.56)."""
     refine_rank: int = 0
-    """The guidance's 3x3 refinement of the stride-4 pixel embedding: 0 = a dense 3x3 conv (the paper's; about
-    a third of the forward on one CPU core), r >= 1 = depthwise 3x3 over r copies of the channels then a 1x1,
+    """The guidance's 3x3 refinement of the stride-4 pixel embedding: 0 = a dense 3x3 conv (about a third of the
+    forward on one CPU core), r >= 1 = depthwise 3x3 over r copies of the channels then a 1x1,
     i.e. the dense kernel factorised to rank r per input channel (`blocks.separable_conv_bn_act`; made from a
     dense checkpoint by `vtdslam compress-msnet`)."""
 
@@ -53,7 +53,7 @@ class MsnetConfig:
             raise ConfigError("widths, depths and patch_sizes need one entry per pyramid level")
         if any(s % 32 for s in self.input_size):
             raise ConfigError(f"input_size must be multiples of 32, got {self.input_size}")
-        if not 0 <= self.refine_rank <= 9:  # a 3x3 kernel per channel pair has rank <= 9
+        if not 0 <= self.refine_rank <= 9:  # an input channel's (out, 9) kernel slice has rank <= 9
             raise ConfigError(f"refine_rank must be in [0, 9], got {self.refine_rank}")
         if not 0.0 <= self.dropout < 1.0:
             raise ConfigError(f"dropout must be in [0, 1), got {self.dropout}")

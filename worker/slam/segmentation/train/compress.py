@@ -8,7 +8,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import cast
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -187,17 +186,3 @@ def mixture_images(dataset, n: int) -> torch.Tensor:
     if len(dataset) == 0:
         raise ConfigError("the training mixture is empty")
     return torch.stack([dataset[i]["image"] for i in range(n)])  # past len(dataset): the next epochs' draws
-
-
-@torch.inference_mode()
-def mask_agreement(a: MSNet, b: MSNet, images: list[np.ndarray], cls: str = "person") -> float:
-    """Pooled IoU of `cls` between two models' argmax masks on RGB images (H, W, 3) already at their input
-    size (1.0 when neither marks any)."""
-    k = a.cfg.classes.index(cls)
-    inter = union = 0
-    for rgb in images:
-        x = torch.from_numpy(rgb).permute(2, 0, 1)[None].float().div(255)
-        pa, pb = a(x).logits.argmax(1) == k, b(x).logits.argmax(1) == k
-        inter += int((pa & pb).sum())
-        union += int((pa | pb).sum())
-    return inter / union if union else 1.0
