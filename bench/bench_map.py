@@ -118,13 +118,13 @@ def check(seq_dir: Path, camera: str, run: Path, references: tuple[Path, int, Pa
     xyz, _ = read_ply(run / "map.ply")
     traj = read_tum_trajectory(run / "trajectory.txt")
     X = xyz.astype(np.float64)
-    near = off_static = None
+    near = off_static = people = None
     if truth is not None:
         people, static = truth_points(seq, truth, gt_in_map_world(seq, traj))
-        near = cKDTree(people).query(X, k=1)[0] < NEAR_M if len(people) else np.zeros(len(xyz), bool)
         off_static = cKDTree(static).query(X, k=1)[0] > NEAR_M
     elif references is not None:
         people = reference_people(seq, traj, *references)
+    if people is not None:
         near = cKDTree(people).query(X, k=1)[0] < NEAR_M if len(people) else np.zeros(len(xyz), bool)
     kf_stamps = read_tum_trajectory(run / "keyframes.txt").timestamps
     kf_frames = {int(i) for i in np.flatnonzero(np.isin(np.round(traj.timestamps, 6), np.round(kf_stamps, 6)))}

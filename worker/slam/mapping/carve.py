@@ -39,7 +39,7 @@ class FrameViews:
         """Frame `k` of the run with its measured depth (H, W) float32 metres."""
         if self.every <= 0 or k % self.every:
             return
-        self.depth[k] = np.ascontiguousarray(measured[::self.stride, ::self.stride], dtype=np.float32).copy()
+        self.depth[k] = np.array(measured[::self.stride, ::self.stride], dtype=np.float32, order="C")  # own copy
         if len(self.depth) > self.max_views:
             self.every *= 2
             self.depth = {i: d for i, d in self.depth.items() if i % self.every == 0}

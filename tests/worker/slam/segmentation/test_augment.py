@@ -4,10 +4,10 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
 
+from tests.worker.slam.segmentation.helpers import tiny_yolo_set
 from tests.worker.slam.segmentation.test_msnet_model import TINY
 from worker.slam.segmentation.train.augment import Cutout, paste
 from worker.slam.segmentation.train.config import presets
@@ -32,16 +32,7 @@ def test_paste_writes_image_and_labels() -> None:
 
 
 def test_mixture_samples_are_deterministic(tmp_path: Path) -> None:
-    root = tmp_path / "data"
-    (root / "images").mkdir(parents=True)
-    (root / "labels").mkdir()
-    bg = tmp_path / "bg"
-    bg.mkdir()
-    rng = np.random.default_rng(1)
-    for i in range(4):
-        cv2.imwrite(str(root / "images" / f"{i}.png"), rng.integers(0, 255, (120, 160, 3), dtype=np.uint8))
-        (root / "labels" / f"{i}.txt").write_text("0 0.2 0.1 0.7 0.1 0.7 0.95 0.2 0.95\n2 0.0 0.0 0.6 0.0 0.6 0.9\n")
-        cv2.imwrite(str(bg / f"{i}.color.jpg"), rng.integers(0, 255, (120, 160, 3), dtype=np.uint8))
+    root, bg = tiny_yolo_set(tmp_path, 4, "0 0.2 0.1 0.7 0.1 0.7 0.95 0.2 0.95\n2 0.0 0.0 0.6 0.0 0.6 0.9\n")
     cfg = replace(presets()["smoke"], model=TINY, yolo_dirs=(str(root),), backgrounds=(str(bg / "*.color.jpg"),),
                   background_stride=1, holdout_every=0, samples_per_epoch=6, p_labelled=0.5)
     ds = build_training_data(cfg).train

@@ -14,6 +14,7 @@ import torch
 from typer.testing import CliRunner
 
 from cli.main import app
+from tests.worker.slam.segmentation.helpers import randomise_batchnorm, tiny_yolo_set
 from tests.worker.slam.segmentation.test_msnet_model import TINY
 from worker.slam.errors import ConfigError
 from worker.slam.segmentation.msnet import MsnetConfig, build_msnet
@@ -27,13 +28,7 @@ def _dense(seed: int = 0) -> MSNet:
     """TINY with BatchNorm statistics away from their defaults (so folding and copying them matter)."""
     torch.manual_seed(seed)
     model = build_msnet(TINY)
-    for m in model.modules():
-        if isinstance(m, torch.nn.BatchNorm2d):
-            assert m.running_mean is not None and m.running_var is not None
-            m.running_mean.uniform_(-0.5, 0.5)
-            m.running_var.uniform_(0.5, 2.0)
-            m.weight.data.uniform_(0.5, 1.5)
-            m.bias.data.uniform_(-0.2, 0.2)
+    randomise_batchnorm(model)
     return model.eval()
 
 
@@ -96,16 +91,7 @@ def test_distillation_brings_the_student_closer_to_the_dense_network() -> None:
 
 
 def test_compress_cli_writes_a_checkpoint_with_its_record(tmp_path: Path) -> None:
-    root = tmp_path / "data"
-    (root / "images").mkdir(parents=True)
-    (root / "labels").mkdir()
-    bg = tmp_path / "bg"
-    bg.mkdir()
-    rng = np.random.default_rng(1)
-    for i in range(6):
-        cv2.imwrite(str(root / "images" / f"{i}.png"), rng.integers(0, 255, (120, 160, 3), dtype=np.uint8))
-        (root / "labels" / f"{i}.txt").write_text("0 0.2 0.1 0.7 0.1 0.7 0.95 0.2 0.95\n")
-        cv2.imwrite(str(bg / f"{i}.color.jpg"), rng.integers(0, 255, (120, 160, 3), dtype=np.uint8))
+    root, bg = tiny_yolo_set(tmp_path, 6, "0 0.2 0.1 0.7 0.1 0.7 0.95 0.2 0.95\n")
     recipe = tmp_path / "recipe.json"
     recipe.write_text(json.dumps({"preset": "smoke", "yolo_dirs": [str(root)], "backgrounds": [str(bg / "*.jpg")],
                                   "background_stride": 1, "holdout_every": 0, "val_every": 3}))

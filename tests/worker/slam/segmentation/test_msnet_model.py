@@ -4,6 +4,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from tests.worker.slam.segmentation.helpers import randomise_batchnorm
 from worker.slam.errors import ConfigError
 from worker.slam.segmentation.msnet import MsnetConfig, build_msnet
 from worker.slam.segmentation.msnet.blocks import fold_batchnorm
@@ -61,14 +62,7 @@ def test_folded_batchnorm_gives_the_same_logits_and_leaves_the_model() -> None:
     """BN statistics away from their defaults, then folded: the same logits to float rounding, no BatchNorm2d
     left where a conv precedes it, and the original keeps its BN layers and its training mode."""
     torch.manual_seed(0)
-    model = build_msnet(TINY)
-    for m in model.modules():
-        if isinstance(m, torch.nn.BatchNorm2d):
-            assert m.running_mean is not None and m.running_var is not None
-            m.running_mean.uniform_(-0.5, 0.5)
-            m.running_var.uniform_(0.5, 2.0)
-            m.weight.data.uniform_(0.5, 1.5)
-            m.bias.data.uniform_(-0.2, 0.2)
+    model = randomise_batchnorm(build_msnet(TINY))
     n_bn = sum(isinstance(m, torch.nn.BatchNorm2d) for m in model.modules())
     folded = fold_batchnorm(model)
     assert model.training and sum(isinstance(m, torch.nn.BatchNorm2d) for m in model.modules()) == n_bn > 0

@@ -13,6 +13,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from worker.slam.errors import ConfigError
+from worker.slam.segmentation.msnet.heads import grid_logits
 from worker.slam.segmentation.msnet.model import MSNet, build_msnet
 
 
@@ -107,17 +108,11 @@ def _cache(teacher: MSNet, images: torch.Tensor, batch: int) -> _Cache:
             cp = f.class_logits.softmax(-1)
             parts["me"].append(f.mask_embed)
             parts["cp"].append(cp)
-            parts["lg"].append(_logits(f.pixel, f.mask_embed, cp))
+            parts["lg"].append(grid_logits(f.pixel, cp, f.mask_embed))
     finally:
         hook.remove()
     return _Cache(torch.cat([s[0] for s in seen]), torch.cat([s[1] for s in seen]), torch.cat(parts["me"]),
                   torch.cat(parts["cp"]), torch.cat(parts["lg"]))
-
-
-def _logits(pixel: torch.Tensor, mask_embed: torch.Tensor, class_probs: torch.Tensor) -> torch.Tensor:
-    """The head (`heads.ClassMaskHead`) before its upsampling: (B, K, h, w) logits at the stride-4 grid."""
-    masks = torch.einsum("bqd,bdhw->bqhw", mask_embed, pixel) / pixel.shape[1] ** 0.5
-    return torch.einsum("bqk,bqhw->bkhw", class_probs, masks)
 
 
 def _kl(target: torch.Tensor, logits: torch.Tensor) -> torch.Tensor:
@@ -142,7 +137,7 @@ def distil_refine(teacher: MSNet, student: MSNet, images: torch.Tensor, cfg: Com
 
     def predict(idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         refined = refine(data.inputs[idx])
-        return refined, _logits(embed(refined), data.mask_embed[idx], data.class_probs[idx])
+        return refined, grid_logits(embed(refined), data.class_probs[idx], data.mask_embed[idx])
 
     val_idx = torch.arange(n_fit, len(images))
 
