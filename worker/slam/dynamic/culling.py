@@ -91,9 +91,20 @@ class CullingConfig:
     """Add the reprojection test with the previous frame's depth."""
     pnp_px: float = valid(2.0, 0.01, 100.0)
     """RANSAC threshold of the depth test's PnP; wider lets a wrong motion explain a moving object too."""
-    refine_min_inliers: float = valid(0.5, 0.0, 1.0)
-    """With a predicted pose, the depth test refines it (no RANSAC) when at least this fraction of the static
-    points agree with it, else falls back to PnP-RANSAC."""
+    min_pose_support: float = valid(0.5, 0.0, 1.0)
+    """The depth test's pose is used only when at least this fraction of the static points agree with it
+    (within `pnp_px`): the predicted pose refined (no RANSAC) when it passes, else (with segments) PnP-RANSAC's
+    pose when that passes. With segments and without a pose, a frame whose prediction guided matching did not
+    confirm cannot be judged (see `undecided_dynamic`): its brute-force matches hold no motion most static
+    points agree on (on Bonn: motion blur behind people who fill the view, where RANSAC's best pose had 0-30 %
+    support, and every segment came out dynamic anyway), and fitting F to them cost 5-10 ms for scores nothing
+    relied on. Without segments (`geometry-only`) the matches include every mover, so a pose's support says
+    less, and any RANSAC pose is used as before."""
+    ap3p_samples: bool = True
+    """With segments, PnP-RANSAC's hypotheses by AP3P on 4 points, then SQPnP on the consensus
+    (`pnp.sqpnp_ransac`): 3.6 ms instead of 11.5 for its 300 hypotheses on a Bonn frame. (`geometry-only`,
+    which needs RANSAC on every frame, keeps SQPnP's samples: the change moved its development ATEs by up to 3x
+    per sequence either way, README "Culling without its tail".)"""
     reprojection_scale: float = valid(3.0, 0.01, 100.0)
     """A reprojection error counts as `error / scale` epipolar pixels (depth noise is larger than keypoint noise)."""
     prediction_veto: bool = True
@@ -115,8 +126,9 @@ class CullingConfig:
     min_points: int = valid(3, 1, 100_000)
     """A segment needs this many matched points to be judged by geometry."""
     undecided_dynamic: bool = True
-    """A potentially dynamic segment with too few matched points to judge is treated as dynamic (safe side:
-    a person's features rarely match across frames when they walk)."""
+    """A potentially dynamic segment with too few matched points to judge, or in a frame that cannot be judged
+    (`min_pose_support`), is treated as dynamic (safe side: a person's features rarely match across frames when
+    they walk)."""
     segment_quantile: float = valid(0.5, 0.0, 1.0)
     """A segment is dynamic when this quantile of its points' scores exceeds Δd (robust to a few bad matches)."""
     min_segment_area: int = valid(200, 0, 10_000_000)
@@ -190,6 +202,8 @@ class CullingResult:
     cur_points: np.ndarray
     guided: bool = False
     """True when the matches came from the pose-guided search (False: brute force)."""
+    judged: bool = True
+    """False when the frame could not be judged and its segments were taken as undecided (`min_pose_support`)."""
 
     def removed(self, keypoints_xy: np.ndarray) -> np.ndarray:
         """bool (M,): which of the current frame's keypoints (M, 2) fall in the excluded region."""
@@ -213,27 +227,33 @@ def _refine_from(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndarra
     for gate in gates:
         err = np.linalg.norm(cv2.projectPoints(X, rvec, tvec, K, None)[0].reshape(-1, 2) - uv, axis=1)
         inl = err < gate * config.pnp_px
-        if inl.sum() < max(6, config.refine_min_inliers * len(X)):
+        if inl.sum() < max(6, config.min_pose_support * len(X)):
             return None
         rvec, tvec = cv2.solvePnPRefineLM(X[inl], uv[inl], K, None, rvec, tvec)
     err = np.linalg.norm(cv2.projectPoints(X, rvec, tvec, K, None)[0].reshape(-1, 2) - uv, axis=1)
-    return (rvec, tvec) if (err < config.pnp_px).mean() >= config.refine_min_inliers else None
+    return (rvec, tvec) if (err < config.pnp_px).mean() >= config.min_pose_support else None
 
 
 def _relative_pose(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndarray | None,
-                   config: CullingConfig) -> tuple[np.ndarray, np.ndarray] | None:
+                   config: CullingConfig, segmented: bool) -> tuple[np.ndarray, np.ndarray] | None:
     """(rvec, tvec) of the current camera from previous-frame points X (N,3) m seen at uv (N,2) px: the
-    predicted pose refined (`_refine_from`) when there is one and most points agree with it, else PnP-RANSAC."""
+    predicted pose refined (`_refine_from`) when there is one and most points agree with it, else PnP-RANSAC's
+    when enough agree with that (`min_pose_support`); None: no depth test for this frame."""
     if T_init is not None:
         pose = _refine_from(X, uv, K, T_init, config)
         if pose is not None:
             return pose
-    got = sqpnp_ransac(X, uv, K, config.pnp_px, 300, 6, config.usac)  # None: no depth test for this frame
-    return None if got is None else (got[0], got[1])
+    got = sqpnp_ransac(X, uv, K, config.pnp_px, 300, 6, config.usac, segmented and config.ap3p_samples)
+    if got is None or segmented and len(got[2]) < config.min_pose_support * len(X):
+        return None
+    return got[0], got[1]
 
 
-def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None) -> np.ndarray:
-    """Motion score (N,) in epipolar pixels; inf-free, 0 where nothing could be measured."""
+def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None, segmented=False,
+            pred_init=None) -> np.ndarray | None:
+    """Motion score (N,) in epipolar pixels; inf-free, 0 where nothing could be measured. None when `segmented`,
+    without a confirmed prediction (`T_init`), the depth test finds no pose (see `min_pose_support`).
+    `pred_init` (N, 2) px: where `T_init` puts the matches' previous keypoints (guided matching computed it)."""
     depth_test = config.use_depth and prev_depth is not None and K is not None
     pose = None
     if depth_test:
@@ -243,7 +263,9 @@ def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None) -> np.nda
         X = backproject(p_prev, z, K)  # (N, 3) previous-camera points; meaningful where `has`
         usable = _spread(np.flatnonzero(has & static), config.fit_max_points)
         if len(usable) >= 6:
-            pose = _relative_pose(X[usable], p_cur[usable].astype(np.float64), K, T_init, config)
+            pose = _relative_pose(X[usable], p_cur[usable].astype(np.float64), K, T_init, config, segmented)
+        if pose is None and segmented and T_init is None:
+            return None
     F = _fundamental(p_prev[static], p_cur[static], pose, K, config)
     predicted = config.prediction_veto and T_init is not None and prev_depth is not None and K is not None
     if F is None and not predicted:
@@ -259,7 +281,8 @@ def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None) -> np.nda
             # refined only where segments hold nearly all matches (see `refine_prediction_below`)
             refine = static.mean() < config.refine_prediction_below
             T_veto = _veto_pose(X, p_cur, has, K, T_init, config) if refine else T_init
-            pred = predict_positions(p_prev[has], z[has], T_veto, K)
+            pred = pred_init[has] if T_veto is T_init and pred_init is not None else \
+                predict_positions(p_prev[has], z[has], T_veto, K)
             score[has] = np.fmin(score[has], np.linalg.norm(pred - p_cur[has], axis=1))  # NaN (behind) = no veto
     score[np.isinf(score)] = 0.0  # not measurable
     return score
@@ -312,7 +335,8 @@ def _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores,
             continue
         cell = grid_labels == lab
         q = np.stack([gx[cell], gy[cell]], 1)
-        idx = PointGrid.of(np.stack([xi[on], yi[on]], 1)).nearest(q, config.local_px, config.local_k)
+        # cells as wide as the radius: a query scans 3x3 of them (a segment's few dozen points are sparse)
+        idx = PointGrid.of(np.stack([xi[on], yi[on]], 1), config.local_px).nearest(q, config.local_px, config.local_k)
         near = idx[:, -1] >= 0  # all k within local_px
         # only towards "static": a few bad matches among a moving object's points must not keep it, but k
         # nearby points that all agree with the static scene are not on it (one-way: a small moving part of a
@@ -413,8 +437,12 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     # Refining the predicted pose needs a clean static set; without segments moving points are in it, and a
     # wide first gate would let them pull the pose along (RANSAC instead).
     T_init = T_cur_prev if m.guided and use_sem else None
-    scores = _scores(p_prev, p_cur, point_label == 0, prev_depth, K, config, T_init) \
+    pred = m.pred[m.prev_idx] if m.pred is not None and T_init is not None else None
+    scores = _scores(p_prev, p_cur, point_label == 0, prev_depth, K, config, T_init, use_sem, pred) \
         if len(p_prev) >= 8 else np.zeros(len(p_prev))
+    judged = scores is not None  # False: no segment can be judged (see `min_pose_support`)
+    if scores is None:
+        scores = np.zeros(len(p_prev))
     decisions = []
     n_labels = int(labels.max())
     moving_label = np.zeros(n_labels + 1, bool)
@@ -437,7 +465,7 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
             if motion is not None:
                 thr_label[lab] = object_threshold(motion.cov, config.threshold)[0]
                 by_object = True
-        if len(s) < config.min_points:
+        if len(s) < config.min_points or not judged:
             moving = config.undecided_dynamic
         else:
             moving = quantile_of_sorted(s, config.segment_quantile) > thr_label[lab]
@@ -454,7 +482,7 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
         point_label = labels[yi, xi]
     # one pass over the image for all segments (none when nothing moves)
     dynamic = pixels_of(labels, moving_label) if moving_label.any() else np.zeros((h, w), bool)
-    if config.local_px > 0 and n_labels:
+    if config.local_px > 0 and n_labels and judged:
         dynamic = _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr_label, config)
     exclude = dilate_disc(dynamic, config.dilation_px)
     if config.detect_unknown or not use_sem:
@@ -469,12 +497,14 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
             clusters |= region
         dynamic |= clusters
         exclude |= dilate_disc(clusters, config.cluster_dilation_px)
-    return CullingResult(dynamic, exclude, decisions, thr, entropy, len(p_prev), scores, p_cur, m.guided)
+    return CullingResult(dynamic, exclude, decisions, thr, entropy, len(p_prev), scores, p_cur, m.guided, judged)
 
 
 @dataclass(frozen=True)
 class _FrameMatches(Matches):
     guided: bool = False
+    pred: np.ndarray | None = None
+    """(N_prev, 2) px: every previous keypoint where the predicted pose puts it (guided matching only)."""
 
 
 def _pixel(coord: np.ndarray, size: int) -> np.ndarray:
@@ -536,7 +566,7 @@ def _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur
                                                config.prefer_static_within)
             free = ~np.isin(b_prev, g.prev_idx)  # a previous keypoint matched twice keeps its guided match
             return _FrameMatches(np.concatenate([g.prev_idx, b_prev[free]]),
-                                 np.concatenate([g_cur, b_cur[free]]), True)
+                                 np.concatenate([g_cur, b_cur[free]]), True, pred)
     m = match_orb(desc_prev, desc_cur, config.match_max_distance)
     return _FrameMatches(m.prev_idx, m.cur_idx, False)
 

@@ -121,7 +121,7 @@ class CullingStage:
         self.history: deque[_PastFrame] = deque(maxlen=max(1, self.cfg.lag_frames))
         self.scores: TruthScores | None = None
         self.removed_total = self.kept_total = self.readmitted_total = 0
-        self.compared = self.guided = 0
+        self.compared = self.guided = self.not_judged = 0
         # semantic segments judged, and how many of them against their own (object-level) Δd
         self.segments_judged = self.object_thresholds = 0
         # Wall time of cull_frame alone (the stage also extracts the frame's ORB, which tracking needs anyway).
@@ -164,7 +164,8 @@ class CullingStage:
             removed = self._readmit(removed, feats.uv, res.dynamic_mask, inputs.info)
             self.compared += 1
             self.guided += res.guided
-            self.segments_judged += sum(s.kind == "semantic" for s in res.segments)
+            self.not_judged += not res.judged
+            self.segments_judged += res.judged * sum(s.kind == "semantic" for s in res.segments)
             self.object_thresholds += sum(s.object_level for s in res.segments)
             self.last = res
             inputs.exclude_mask = res.exclude_mask
@@ -172,7 +173,7 @@ class CullingStage:
             inputs.info.update(dynamic_fraction=float(res.dynamic_mask.mean()), threshold_px=res.threshold_px,
                                dynamic_segments=sum(s.dynamic for s in res.segments),
                                segments=len(res.segments),
-                               object_thresholds=sum(s.object_level for s in res.segments))
+                               object_thresholds=sum(s.object_level for s in res.segments), judged=res.judged)
             if res.entropy is not None:
                 inputs.info["motion_entropy"] = res.entropy
             if self.scores is not None and ctx.truth is not None and frame.index < len(ctx.truth):
@@ -207,6 +208,7 @@ class CullingStage:
         out: dict = {"features_removed": self.removed_total, "features_kept": self.kept_total,
                "features_readmitted": self.readmitted_total,
                "frames_compared": self.compared, "guided_matching_frames": self.guided,
+               "frames_not_judged": self.not_judged,
                "segments_judged": self.segments_judged, "object_level_thresholds": self.object_thresholds,
                "decision_ms_median": float(np.median(self.decision_ms)) if self.decision_ms else None}
         if self.scores is not None:

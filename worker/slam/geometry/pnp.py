@@ -27,16 +27,23 @@ def pnp_ransac(X_w: np.ndarray, uv: np.ndarray, K: np.ndarray, reproj_px: float 
 
 
 def sqpnp_ransac(X: np.ndarray, uv: np.ndarray, K: np.ndarray, reproj_px: float, iterations: int,
-                 min_inliers: int, usac: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+                 min_inliers: int, usac: bool = False,
+                 ap3p_samples: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(rvec, tvec, inlier indices) of the camera seeing (N,3) points `X` at (N,2) float64 pixels `uv`, by
     SQPnP-RANSAC (EPnP degenerates on planar scenes); None when it fails or keeps fewer than `min_inliers`.
     SQPnP asserts on a sample whose points (nearly) coincide (seen on real frames): that is a failure too.
     `usac`: OpenCV's USAC instead (P3P samples, local optimisation, SQPnP-free), far fewer hypotheses when
-    most points are outliers."""
-    flags = cv2.USAC_DEFAULT if usac else cv2.SOLVEPNP_SQPNP
+    most points are outliers. `ap3p_samples`: the hypotheses by AP3P on 4 points (a third of the cost per
+    hypothesis in OpenCV's loop), then SQPnP on their consensus and the inliers of that fit (OpenCV would refit
+    a P3P consensus by EPnP)."""
+    flags = cv2.USAC_DEFAULT if usac else cv2.SOLVEPNP_AP3P if ap3p_samples else cv2.SOLVEPNP_SQPNP
     try:
         ok, rvec, tvec, inl = cv2.solvePnPRansac(X, uv, K, None, reprojectionError=reproj_px,
                                                  iterationsCount=iterations, flags=flags)
+        if ok and inl is not None and len(inl) >= min_inliers and flags == cv2.SOLVEPNP_AP3P:
+            ok, rvec, tvec = cv2.solvePnP(X[inl.ravel()], uv[inl.ravel()], K, None, flags=cv2.SOLVEPNP_SQPNP)
+            err = np.linalg.norm(cv2.projectPoints(X, rvec, tvec, K, None)[0].reshape(-1, 2) - uv, axis=1)
+            inl = np.flatnonzero(err < reproj_px)
     except cv2.error:
         return None
     if not ok or inl is None or len(inl) < min_inliers:
