@@ -1,7 +1,7 @@
 """The paper's ablation on dynamic sequences: presets side by side, with the truth-based scores of each stage.
 
     .venv/bin/python bench/bench_dynamic.py --sequence DIR:CAMERA [--sequence ...] [--presets a,b] \
-        [--max-frames N] [--config JSON] [--summary] [--teacher TFLITE]
+        [--max-frames N] [--config JSON] [--summary] [--teacher TFLITE] [--starts 0,2,4,6]
 
 `--teacher` adds, for each preset that segments, the same run with that TFLite model as its segmenter (e.g.
 the DeepLabV3 teacher), so MSNET and the teacher are compared in one table (`marked area`: the mean share of
@@ -13,7 +13,9 @@ error, ms per frame of culling and restoration, and end-to-end fps. Benchmarks p
 
 `--summary` adds each preset's mean, min and max over the sequences: give it several sequences of one kind
 (`vtdslam augment --seed 1`, `--seed 2`, ...). One 300-frame run's ATE swings by tens of percent with small
-changes (which features happen to survive), so presets and settings are compared on such means.
+changes (which features happen to survive), so presets and settings are compared on such means. `--starts
+0,2,4,6` runs each sequence from each of those first frames (the rows say `@k`): the same footage started a
+frame or two later, a run-to-run spread for a single real sequence.
 
 `--references` adds two rows per sequence with truth, both run on the truth's background frames (the same
 frames without people): `people-free` (`orb-only`), the denominator of "within 1.2x of the ATE without
@@ -52,20 +54,21 @@ def _fmt(v, nd=3, scale=1.0):
 
 
 def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, overrides: dict | None,
-        label: str | None = None, name: str | None = None, extra: dict | None = None) -> dict:
+        label: str | None = None, name: str | None = None, extra: dict | None = None, start: int = 0) -> dict:
     """One bench row; `label` names the row instead of the preset, `name` the sequence instead of its folder,
-    `extra` overrides applied after `overrides` (a reference's own settings)."""
+    `extra` overrides applied after `overrides` (a reference's own settings), `start` the first frame."""
     seq = Sequence(seq_dir, parse_camera(camera))
     config = get_preset(preset, overrides)
     if extra:
         config = config.with_overrides(extra)
     with tempfile.TemporaryDirectory() as out:
-        m = run_pipeline(seq, config, out, max_frames=max_frames).metrics
+        m = run_pipeline(seq, config, out, start=start, max_frames=max_frames).metrics
     cull, rest = m.get("culling", {}), m.get("restoration", {})
     ct, rt = cull.get("truth", {}), rest.get("truth", {})
     info = m.get("stage_info", {})
     return {
-        "sequence": name or Path(seq_dir).name, "preset": label or preset, "frames": m["frames"],
+        "sequence": (name or Path(seq_dir).name) + (f" @{start}" if start else ""), "preset": label or preset,
+        "frames": m["frames"],
         "tracked": m["tracked"], "marked": info.get("potentially_dynamic_fraction"),
         "ate": m.get("ate", {}).get("rmse"), "rpe_t": m.get("rpe", {}).get("trans", {}).get("rmse"),
         "rpe_r": m.get("rpe", {}).get("rot_deg", {}).get("rmse"),
@@ -76,7 +79,9 @@ def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, override
         "seg_ms": m["timings_ms"].get("segmentation"), "cull_ms": m["timings_ms"].get("culling"),
         "rest_ms": m["timings_ms"].get("restoration"), "fps": m.get("fps"),
         "decision_ms": cull.get("decision_ms_median"),
-        "guided": f"{cull['guided_matching_frames']}/{cull['frames_compared']}" if "frames_compared" in cull else "–",
+        "guided": f"{cull['guided_matching_frames']}/{cull['frames_compared']}"
+                  + (f" ({cull['frames_not_judged']} not judged)" if cull.get("frames_not_judged") else "")
+                  if "frames_compared" in cull else "–",
     }
 
 
@@ -89,10 +94,19 @@ def main() -> None:
     ap.add_argument("--summary", action="store_true", help="also print each preset's mean over the sequences")
     ap.add_argument("--teacher", default=None, metavar="TFLITE",
                     help="also run each preset that segments with this model as its segmenter (`tflite-teacher`)")
+    ap.add_argument("--starts", default="0", metavar="K,K,...",
+                    help="run each sequence from each of these first frames (a run-to-run spread: one run's ATE "
+                         "swings with small changes)")
     ap.add_argument("--references", action="store_true",
                     help="also run `people-free` and `masks removed` on each sequence's truth backgrounds")
     args = ap.parse_args()
     overrides = json.loads(args.config) if args.config else None
+    try:
+        starts = [int(k) for k in args.starts.split(",")]
+    except ValueError:
+        ap.error(f"--starts takes comma-separated frame indices, not {args.starts!r}")
+    if any(k < 0 for k in starts):
+        ap.error("--starts must be >= 0")
     print("| sequence | preset | frames | tracked | marked area | ATE rmse (m) | RPE t (m/s) | RPE r (°/s) "
           "| static feats/frame | removed/frame | restored feats/frame | dyn. precision | dyn. recall | mask IoU "
           "| restore PSNR (dB) | restore depth err (cm) | seg ms | cull ms (with ORB) | cull decision ms "
@@ -113,10 +127,11 @@ def main() -> None:
                     raise SystemExit(f"{seq_dir}: the truth's depth scale is not the camera's {camera!r}")
                 bg = str(write_background_sequence(seq_dir, Path(tmp) / "bg"))
                 runs += [(bg, preset, extra, label) for label, (preset, extra) in REFERENCES.items()]
-            for run_dir, preset, extra, label in runs:
-                rows.append(row(run_dir, camera, preset, args.max_frames, overrides, label, Path(seq_dir).name,
-                                extra))
-                print_row(rows[-1])
+            for start in starts:
+                for run_dir, preset, extra, label in runs:
+                    rows.append(row(run_dir, camera, preset, args.max_frames, overrides, label,
+                                    Path(seq_dir).name, extra, start))
+                    print_row(rows[-1])
     if args.summary:
         print_summary(rows)
 
