@@ -81,6 +81,8 @@ def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, override
         "decision_ms": cull.get("decision_ms_median"),
         "guided": f"{cull['guided_matching_frames']}/{cull['frames_compared']}"
                   + (f" ({cull['frames_not_judged']} not judged)" if cull.get("frames_not_judged") else "")
+                  + (f" ({cull['frames_without_objects']} without objects)" if cull.get("frames_without_objects")
+                     else "")
                   if "frames_compared" in cull else "–",
     }
 

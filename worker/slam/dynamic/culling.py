@@ -204,6 +204,9 @@ class CullingResult:
     """True when the matches came from the pose-guided search (False: brute force)."""
     judged: bool = True
     """False when the frame could not be judged and its segments were taken as undecided (`min_pose_support`)."""
+    without_objects: bool = False
+    """True when segmentation left no segment to judge (and `detect_unknown` is off): nothing was matched or
+    scored, since no decision would use it (45 of Bonn's 313 frames with MSNET; most of static 7-Scenes)."""
 
     def removed(self, keypoints_xy: np.ndarray) -> np.ndarray:
         """bool (M,): which of the current frame's keypoints (M, 2) fall in the excluded region."""
@@ -418,7 +421,8 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     `kp_*` (N, 2) pixel coordinates (x, y) with ORB `desc_*` (N, 32) uint8; `depth_cur` float32 m (H, W);
     `potentially_dynamic` bool (H, W) from segmentation (None in geometry-only mode); `pose_cov` the 6x6
     covariance of the previous pose estimate (for Δd); `prev_depth` + `K` enable the reprojection test;
-    `T_cur_prev` (4x4, X_cur = T X_prev), the predicted relative pose, enables guided matching.
+    `T_cur_prev` (4x4, X_cur = T X_prev), the predicted relative pose, enables guided matching. With
+    segmentation that leaves no segment, nothing is matched (`CullingResult.without_objects`).
     """
     h, w = depth_cur.shape
     entropy = motion_entropy(pose_cov)
@@ -427,6 +431,9 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     labels = split_segments(potentially_dynamic, depth_cur, config.min_segment_area, config.depth_jump,
                             config.segment_step) \
         if use_sem and potentially_dynamic is not None else np.zeros((h, w), np.int32)
+    if use_sem and not config.detect_unknown and not labels.any():
+        empty = np.zeros((h, w), bool)
+        return CullingResult(empty, empty, [], thr, entropy, 0, np.zeros(0), np.zeros((0, 2)), without_objects=True)
     # Keypoints on objects are matched exhaustively (a search radius would keep only their small motions and
     # bias the decision towards "static"); the static rest, when a pose is predicted, by the guided search.
     on_object = labels[_pixel(kp_cur[:, 1], h), _pixel(kp_cur[:, 0], w)] > 0 if use_sem else None

@@ -121,7 +121,7 @@ class CullingStage:
         self.history: deque[_PastFrame] = deque(maxlen=max(1, self.cfg.lag_frames))
         self.scores: TruthScores | None = None
         self.removed_total = self.kept_total = self.readmitted_total = 0
-        self.compared = self.guided = self.not_judged = 0
+        self.compared = self.guided = self.not_judged = self.without_objects = 0
         # semantic segments judged, and how many of them against their own (object-level) Δd
         self.segments_judged = self.object_thresholds = 0
         # Wall time of cull_frame alone (the stage also extracts the frame's ORB, which tracking needs anyway).
@@ -165,6 +165,7 @@ class CullingStage:
             self.compared += 1
             self.guided += res.guided
             self.not_judged += not res.judged
+            self.without_objects += res.without_objects
             self.segments_judged += res.judged * sum(s.kind == "semantic" for s in res.segments)
             self.object_thresholds += sum(s.object_level for s in res.segments)
             self.last = res
@@ -208,7 +209,7 @@ class CullingStage:
         out: dict = {"features_removed": self.removed_total, "features_kept": self.kept_total,
                "features_readmitted": self.readmitted_total,
                "frames_compared": self.compared, "guided_matching_frames": self.guided,
-               "frames_not_judged": self.not_judged,
+               "frames_not_judged": self.not_judged, "frames_without_objects": self.without_objects,
                "segments_judged": self.segments_judged, "object_level_thresholds": self.object_thresholds,
                "decision_ms_median": float(np.median(self.decision_ms)) if self.decision_ms else None}
         if self.scores is not None:

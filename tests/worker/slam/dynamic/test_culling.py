@@ -149,6 +149,24 @@ def test_the_veto_refines_a_prediction_a_few_pixels_off_on_the_static_majority()
     assert removed(False)[0] < 0.5  # the wall went too
 
 
+def test_a_frame_without_segments_matches_nothing_unless_unknown_movers_are_looked_for():
+    """Segmentation that leaves no segment (nothing marked, or only blobs under `min_segment_area`): no
+    decision would use matches or scores, so none are made; `detect_unknown` and `geometry-only` still match."""
+    (rgb0, d0, _), (rgb1, d1, m1) = two_frames(0.06)
+    kp0, ds0 = orb(rgb0)
+    kp1, ds1 = orb(rgb1)
+    speck = np.zeros_like(m1)
+    speck[10:15, 10:15] = True  # 25 px, under min_segment_area
+    for mask in (np.zeros_like(m1), speck):
+        res = cull_frame(kp0, ds0, kp1, ds1, d1, mask, COV, CullingConfig(), d0, K)
+        assert res.without_objects and res.matches == 0 and not res.segments
+        assert not res.dynamic_mask.any() and not res.exclude_mask.any() and res.judged
+    looked = cull_frame(kp0, ds0, kp1, ds1, d1, speck, COV, CullingConfig(detect_unknown=True), d0, K)
+    assert not looked.without_objects and looked.matches > 0 and looked.dynamic_mask.any()  # the moving board
+    res, _, _ = run(0.06, mask=False, use_segmentation=False)
+    assert not res.without_objects and res.matches > 0
+
+
 def test_still_object_of_dynamic_class_keeps_features():
     res, kp, _ = run(0.0)
     assert not any(s.dynamic for s in res.segments if s.kind == "semantic")
