@@ -34,7 +34,7 @@ from worker.slam.features.depth import backproject
 from worker.slam.features.grid import PointGrid
 from worker.slam.features.matching import hamming
 from worker.slam.features.search import KeypointIndex
-from worker.slam.geometry.pnp import sqpnp_ransac
+from worker.slam.geometry.pnp import reprojection_px, sqpnp_ransac
 
 
 @dataclass(frozen=True)
@@ -228,13 +228,12 @@ def _refine_from(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndarra
     rvec, tvec = cv2.Rodrigues(T_init[:3, :3])[0], T_init[:3, 3].reshape(3, 1).copy()
     # the prediction can be several pixels off: refine on a wide gate first, then tighten it
     for gate in gates:
-        err = np.linalg.norm(cv2.projectPoints(X, rvec, tvec, K, None)[0].reshape(-1, 2) - uv, axis=1)
-        inl = err < gate * config.pnp_px
+        inl = reprojection_px(X, uv, K, rvec, tvec) < gate * config.pnp_px
         if inl.sum() < max(6, config.min_pose_support * len(X)):
             return None
         rvec, tvec = cv2.solvePnPRefineLM(X[inl], uv[inl], K, None, rvec, tvec)
-    err = np.linalg.norm(cv2.projectPoints(X, rvec, tvec, K, None)[0].reshape(-1, 2) - uv, axis=1)
-    return (rvec, tvec) if (err < config.pnp_px).mean() >= config.min_pose_support else None
+    support = (reprojection_px(X, uv, K, rvec, tvec) < config.pnp_px).mean()
+    return (rvec, tvec) if support >= config.min_pose_support else None
 
 
 def _relative_pose(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndarray | None,
@@ -277,8 +276,7 @@ def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None, segmented
     score = epipolar_distance(F, p_prev, p_cur) if F is not None else np.full(len(p_prev), np.inf)
     if depth_test:
         if pose is not None:
-            proj, _ = cv2.projectPoints(X[has], *pose, K, None)
-            err = np.linalg.norm(proj.reshape(-1, 2) - p_cur[has], axis=1)
+            err = reprojection_px(X[has], p_cur[has], K, *pose)
             score[has] = np.maximum(score[has], err / config.reprojection_scale)
         if config.prediction_veto and T_init is not None and has.any():
             # refined only where segments hold nearly all matches (see `refine_prediction_below`)

@@ -26,6 +26,12 @@ def pnp_ransac(X_w: np.ndarray, uv: np.ndarray, K: np.ndarray, reproj_px: float 
     return T_WC, mask
 
 
+def reprojection_px(X: np.ndarray, uv: np.ndarray, K: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
+    """(N,) pixel distance between points `X` (N,3) projected by the pose (rvec, tvec) and their keypoints `uv`
+    (N,2) px (no distortion)."""
+    return np.linalg.norm(cv2.projectPoints(X, rvec, tvec, K, None)[0].reshape(-1, 2) - uv, axis=1)
+
+
 def sqpnp_ransac(X: np.ndarray, uv: np.ndarray, K: np.ndarray, reproj_px: float, iterations: int,
                  min_inliers: int, usac: bool = False,
                  ap3p_samples: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -42,8 +48,7 @@ def sqpnp_ransac(X: np.ndarray, uv: np.ndarray, K: np.ndarray, reproj_px: float,
                                                  iterationsCount=iterations, flags=flags)
         if ok and inl is not None and len(inl) >= min_inliers and flags == cv2.SOLVEPNP_AP3P:
             ok, rvec, tvec = cv2.solvePnP(X[inl.ravel()], uv[inl.ravel()], K, None, flags=cv2.SOLVEPNP_SQPNP)
-            err = np.linalg.norm(cv2.projectPoints(X, rvec, tvec, K, None)[0].reshape(-1, 2) - uv, axis=1)
-            inl = np.flatnonzero(err < reproj_px)
+            inl = np.flatnonzero(reprojection_px(X, uv, K, rvec, tvec) < reproj_px)
     except cv2.error:
         return None
     if not ok or inl is None or len(inl) < min_inliers:
