@@ -87,6 +87,11 @@ class TrackingConfig:
     as inliers stay with the frame, so the map's established static points decide which marked parts are
     static, and unmatched keypoints on people never become map points. A first frame whose kept keypoints
     cannot start a map starts it on all of them (nothing to judge them by yet). Counted as `rescued_frames`."""
+    retry_from_last_pose: bool = True
+    """A frame that cannot be tracked from the constant-velocity prediction (held-back keypoints included) is
+    tracked again from the last frame's pose before relocalisation, as ORB-SLAM falls back from its motion
+    model to the reference keyframe: a velocity taken from a few badly tracked frames overshoots. Counted as
+    `last_pose_retries`."""
     local_map_keyframes: int = valid(12, 1, 1_000)
     """Covisible keyframes whose points form the local map."""
     keyframe_max_frames: int = valid(20, 1, 100_000)

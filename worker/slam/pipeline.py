@@ -224,7 +224,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
         "frames": total, "tracked": int(tracked.sum()), "lost": int((~tracked).sum()),
         "relocalisations": n_reloc, "new_maps": n_new_maps, "map_merges": n_merges,
         "established_switches": tracker.established_switches,
-        "rescued_frames": tracker.rescued_frames,
+        "rescued_frames": tracker.rescued_frames, "last_pose_retries": tracker.last_pose_retries,
         "keyframes": len(smap), "map_points": smap.points.n_alive,
         "loops": closer.n_loops if closer else 0, "loops_applied": closer.n_applied if closer else 0,
         "fps": round(total / loop_s, 2) if loop_s > 0 else None,

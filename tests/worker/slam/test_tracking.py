@@ -176,6 +176,23 @@ def test_relocalisation_after_a_jump():
     assert pose_distance(res.T_WC, inv(poses[0]) @ poses[9])[0] < 0.02
 
 
+@pytest.mark.parametrize("retry", [True, False])
+def test_an_overshooting_velocity_is_retried_from_the_last_pose_before_relocalisation(retry):
+    """A velocity 25 cm and 15 deg off (as from a few badly tracked frames) puts the prediction where no map
+    point matches: the frame is tracked from the last pose instead (`retry_from_last_pose`), not relocalised."""
+    poses = trajectory(12, yaw_span_deg=10)
+    tr = Tracker(CAM, get_preset("orb-only", {"tracking": {"retry_from_last_pose": retry}}))
+    for i, T in enumerate(poses[:8]):
+        rgb, depth = render(T)
+        assert tr.track(i, i / 30, rgb, depth).ok
+    tr.motion.velocity = pose([0.25, 0.0, 0.05], 15)
+    rgb, depth = render(poses[8])
+    retries = tr.last_pose_retries
+    res = tr.track(8, 8 / 30, rgb, depth)
+    assert res.ok and pose_distance(res.T_WC, inv(poses[0]) @ poses[8])[0] < 0.01
+    assert (tr.last_pose_retries - retries, res.relocalised) == ((1, False) if retry else (0, True))
+
+
 def test_tracker_undistorts_keypoints_of_a_distorted_camera():
     import cv2
 

@@ -57,6 +57,7 @@ class Tracker:
         self.established_switches = 0
         #: Frames tracked only with the keypoints culling held back (`rescue_with_held_back`).
         self.rescued_frames = 0
+        self.last_pose_retries = 0  # frames tracked from the last pose after the motion model failed
         #: First keyframe id of every map not merged into an older one (maps after a loss continue the ids).
         self.map_starts = [0]
         #: The last successfully tracked frame's result (the pipeline hands its pose to the stages).
@@ -106,10 +107,13 @@ class Tracker:
 
         pred = self.motion.predict()
         assert pred is not None and self.ref_kf is not None, "the map's first keyframe set both"
-        est, pids = self._track_local_map(feats, pred)
-        if est is None and self.tc.rescue_with_held_back and given.held_back is not None and len(given.held_back):
-            est, pids, feats = self._rescue(feats, given.held_back, pred)
-            self.rescued_frames += int(est is not None)
+        est, pids, feats = self._track_from(pred, feats, given.held_back)
+        if est is None and self.tc.retry_from_last_pose and self.motion.velocity is not None:
+            # ORB-SLAM's fallback from the motion model to the last frame's pose: a velocity from a few badly
+            # tracked frames overshoots (Bonn, motion blur behind people: the frame after them was lost)
+            assert self.motion.last is not None
+            est, pids, feats = self._track_from(self.motion.last, feats, given.held_back)
+            self.last_pose_retries += int(est is not None)
         relocalised = False
         if est is None:
             est, pids = self._relocalise(feats)
@@ -225,6 +229,16 @@ class Tracker:
             return True
         self.ref_kf, self.local_kfs, self.last_point_ids = saved
         return False
+
+    def _track_from(self, pred: np.ndarray, feats: Features, held_back: Features | None
+                    ) -> tuple[PoseEstimate | None, np.ndarray, Features]:
+        """Local-map tracking of `feats` from the pose `pred`, then with the held-back keypoints added (see
+        `rescue_with_held_back`); returns (estimate or None, point ids, the frame's keypoints)."""
+        est, pids = self._track_local_map(feats, pred)
+        if est is None and self.tc.rescue_with_held_back and held_back is not None and len(held_back):
+            est, pids, feats = self._rescue(feats, held_back, pred)
+            self.rescued_frames += int(est is not None)
+        return est, pids, feats
 
     def _rescue(self, feats: Features, held_back: Features, pred: np.ndarray
                 ) -> tuple[PoseEstimate | None, np.ndarray, Features]:
