@@ -57,7 +57,8 @@ class Tracker:
         self.established_switches = 0
         #: Frames tracked only with the keypoints culling held back (`rescue_with_held_back`).
         self.rescued_frames = 0
-        self.last_pose_retries = 0  # frames tracked from the last pose after the motion model failed
+        #: Frames tracked from the last pose after the motion model failed (`retry_from_last_pose`).
+        self.last_pose_retries = 0
         #: First keyframe id of every map not merged into an older one (maps after a loss continue the ids).
         self.map_starts = [0]
         #: The last successfully tracked frame's result (the pipeline hands its pose to the stages).
