@@ -79,12 +79,18 @@ def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, override
         "seg_ms": m["timings_ms"].get("segmentation"), "cull_ms": m["timings_ms"].get("culling"),
         "rest_ms": m["timings_ms"].get("restoration"), "fps": m.get("fps"),
         "decision_ms": cull.get("decision_ms_median"),
-        "guided": f"{cull['guided_matching_frames']}/{cull['frames_compared']}"
-                  + (f" ({cull['frames_not_judged']} not judged)" if cull.get("frames_not_judged") else "")
-                  + (f" ({cull['frames_without_objects']} without objects)" if cull.get("frames_without_objects")
-                     else "")
-                  if "frames_compared" in cull else "–",
+        "guided": _guided_cell(cull),
     }
+
+
+def _guided_cell(cull: dict) -> str:
+    """Guided frames / frames compared, with the frames not judged and without objects when there are any."""
+    if "frames_compared" not in cull:
+        return "–"
+    notes = [f" ({cull[key]} {what})" for key, what in (("frames_not_judged", "not judged"),
+                                                        ("frames_without_objects", "without objects"))
+             if cull.get(key)]
+    return f"{cull['guided_matching_frames']}/{cull['frames_compared']}" + "".join(notes)
 
 
 def main() -> None:

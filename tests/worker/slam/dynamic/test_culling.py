@@ -192,7 +192,8 @@ def test_a_pnp_that_opencv_refuses_leaves_an_unconfirmed_frame_undecided_and_the
     board is taken as dynamic (undecided), where the same frame with its pose keeps it."""
     import worker.slam.dynamic.culling as culling
 
-    assert run(0.0)[0].judged and not any(s.dynamic for s in run(0.0)[0].segments)
+    posed = run(0.0)[0]
+    assert posed.judged and not any(s.dynamic for s in posed.segments)
 
     def refuse(*_args, **_kwargs):
         raise cv2.error("point_coordinate_variance >= POINT_VARIANCE_THRESHOLD")
