@@ -181,6 +181,8 @@ def main() -> None:
                     help="second-chance references (restoration.selection.far_refs) to compare, comma-separated")
     ap.add_argument("--align-px", default=str(RestorationConfig().align_px),
                     help="restoration.restoration.align_px values to compare, comma-separated (0: off)")
+    ap.add_argument("--blend-refs", default=str(RestorationConfig().blend_refs),
+                    help="restoration.restoration.blend_refs values to compare, comma-separated (1: first only)")
     ap.add_argument("--unseen-depth", default="border", help="depth of pixels no reference sees: border|none")
     args = ap.parse_args()
     if not args.sequences and not args.static:
@@ -195,12 +197,14 @@ def main() -> None:
           "depth restored % | ms/frame |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     windows = args.references.split(",")
-    for root, window, fill, far, align in itertools.product(args.sequences, windows, fills, args.far_refs.split(","),
-                                                            args.align_px.split(",")):
-        config = RestorationConfig(unseen_fill=fill, unseen_depth=args.unseen_depth, align_px=int(align))
+    for root, window, fill, far, align, blend in itertools.product(
+            args.sequences, windows, fills, args.far_refs.split(","), args.align_px.split(","),
+            args.blend_refs.split(",")):
+        config = RestorationConfig(unseen_fill=fill, unseen_depth=args.unseen_depth, align_px=int(align),
+                                   blend_refs=int(blend))
         sel_cfg = ReferenceSelectionConfig(far_refs=int(far))
         r = bench_sequence(root, args.camera, args.frames, window == "both-sided", config, sel_cfg)
-        print(f"| {root.name} | {window}, far refs: {far}, align: {align}, unseen: {fill}, "
+        print(f"| {root.name} | {window}, far refs: {far}, align: {align}, blend: {blend}, unseen: {fill}, "
               f"depth: {args.unseen_depth} | {r['frames']} | {100 * r['hole']:.1f} | "
               f"{r['refs']:.1f} | {100 * r['seen']:.0f} | {r['pm_psnr']:.2f} | {r['seen_psnr']:.2f} | "
               f"{r['unseen_psnr']:.2f} | {r['telea_psnr']:.2f} | {100 * r['pm_depth_med']:.2f} | "
