@@ -151,14 +151,14 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
         aligned = config.align_px and config.subpixel  # the shift moves the sub-pixel samples
         ring = hole_ring(rgb, depth, hole, region, config.align_ring_px) if aligned else None
         # each pixel averages up to `blend_refs` references that agree with the depth averaged so far
-        acc, z_acc, n_acc = np.zeros((len(py), 3)), np.zeros(len(py)), np.zeros(len(py))
+        acc, z_acc = np.zeros((len(py), 3)), np.zeros(len(py))
+        n_acc = np.zeros(len(py), np.int64)
         for s, ref in enumerate(refs):
             sel, yx_sel = _landings(landed[s], ry, rx, n_acc, config.blend_refs)
             if not len(sel):
                 continue
             z = depth_in_target(ref.depth, yx_sel, rel[s], K)
-            n_sel = n_acc[sel]
-            agree = (n_sel == 0) | (np.abs(z - z_acc[sel] / np.maximum(n_sel, 1)) <= config.blend_depth_tol * z)
+            agree = _agreeing(sel, z, z_acc, n_acc, config.blend_depth_tol)
             if not agree.all():
                 sel, yx_sel, z = sel[agree], yx_sel[agree], z[agree]
             col = ref.rgb[yx_sel[:, 0], yx_sel[:, 1]]
@@ -170,12 +170,11 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
                 sub, ok = sample_reference(ref.rgb, valid[s], np.stack([py[sel], px[sel]], 1), z, rel[s], K,
                                            shift)
                 col = np.where(ok[:, None], sub, col)
-            acc[sel] += col * gains[s]
-            z_acc[sel] += z
-            n_acc[sel] += 1
-        done = n_acc > 0
-        d[done] = z_acc[done] / n_acc[done]
-        out_rgb[py[done], px[done]] = np.clip(acc[done] / n_acc[done, None] + 0.5, 0, 255).astype(np.uint8)
+            _accumulate(acc, z_acc, n_acc, sel, col, np.asarray(gains[s], np.float64), z)
+        done = np.flatnonzero(n_acc > 0)
+        n_done = n_acc[done].astype(np.float64)
+        d[done] = z_acc[done] / n_done
+        out_rgb[py[done], px[done]] = np.clip(acc[done] / n_done[:, None] + 0.5, 0, 255).astype(np.uint8)
     search = ~geo if config.geometry_first else np.ones(len(py), bool)
     if search.any() and config.unseen_fill in ("telea", "harmonic"):
         fy, fx = py[search], px[search]
@@ -245,6 +244,28 @@ def _landings(landed, ry, rx, n_acc, limit):
             yx[k, 0], yx[k, 1] = y, landed[ry[i], rx[i], 1]
             k += 1
     return idx[:k], yx[:k]
+
+
+@njit(cache=True, nogil=True)
+def _agreeing(sel, z, z_acc, n_acc, tol):
+    """bool (K,): hole pixels `sel` (K,) with no colour yet, or whose depth `z` (K,) through this reference is
+    within `tol` (relative) of the depth averaged so far (`z_acc` / `n_acc`, (N,))."""
+    out = np.empty(len(sel), np.bool_)
+    for k in range(len(sel)):
+        n = n_acc[sel[k]]
+        out[k] = n == 0 or abs(z[k] - z_acc[sel[k]] / n) <= tol * z[k]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _accumulate(acc, z_acc, n_acc, sel, col, gain, z):
+    """Add colours `col` (K, 3) x `gain` (3,) and depths `z` (K,) to the sums of hole pixels `sel` (K,)."""
+    for k in range(len(sel)):
+        i = sel[k]
+        for c in range(3):
+            acc[i, c] += col[k, c] * gain[c]
+        z_acc[i] += z[k]
+        n_acc[i] += 1
 
 
 @njit(cache=True, nogil=True)
