@@ -74,9 +74,9 @@ class RestorationConfig:
     """Hole pixels references see through geometry average the colours (each at its reference's gain) and the
     depths of up to this many of them, in reference order, each agreeing with the depth averaged so far within
     `blend_depth_tol`; 1 = the first (best) reference alone. Warps from two poses err differently (depth noise,
-    a pose a few pixels off), so their average is closer to the truth: 2 gained 0.2-1.0 dB and 0.1-0.4 cm of
-    median depth error per sequence with true masks and poses (README, "Background restoration"); more than 2
-    gained nothing on the augmented frames."""
+    a pose a few pixels off), so their average is closer to the truth: 2 gained 0.2-0.8 dB of whole-hole PSNR and
+    0.1-0.2 cm of median depth error per sequence with true masks and poses, and 0.2-0.7 dB on the restored
+    keyframes in the pipeline (README, "Background restoration"); 3 gained nothing more on augmented frames."""
     blend_depth_tol: float = valid(0.05, 0.0, 10.0)
     """Relative depth difference within which a further reference joins a pixel's average (beyond it, it saw
     another surface)."""
