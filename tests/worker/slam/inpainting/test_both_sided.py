@@ -53,19 +53,23 @@ class WallSequence:
         return Frame(index, index / 30.0, rgb, depth)
 
 
-def run_stage(references: str) -> tuple[FrameInputs, RestorationStage, np.ndarray]:
+def run_stage(references: str, seq: WallSequence | None = None, mask=person,
+              overrides: dict | None = None) -> tuple[FrameInputs, RestorationStage, np.ndarray]:
+    """The stage over frames 0..TARGET of `seq` with `mask(i)` as each frame's dynamic mask; returns the target's
+    inputs, the stage and the target's true background."""
     # every frame restored in `process` (not deferred to keyframes and previews): the target's result is read here
-    config = get_preset("full", {"restoration.references": references, "restoration.on_demand": False})
+    config = get_preset("full", {"restoration.references": references, "restoration.on_demand": False,
+                                 **(overrides or {})})
     camera = Camera(fx=K[0, 0], fy=K[1, 1], cx=K[0, 2], cy=K[1, 2], width=W, height=H)
     extractor = OrbExtractor(config.features)
-    seq = WallSequence()
+    seq = seq if seq is not None else WallSequence()
     stage = RestorationStage(config, camera)
     last: TrackedPose | None = None
     inputs = FrameInputs()
     for i in range(TARGET + 1):
         f = seq[i]
         gray = cv2.cvtColor(f.rgb, cv2.COLOR_RGB2GRAY)
-        inputs = FrameInputs(features=extractor.extract(gray, f.depth, person(i)), dynamic_mask=person(i))
+        inputs = FrameInputs(features=extractor.extract(gray, f.depth, mask(i)), dynamic_mask=mask(i))
         ctx = StageContext(camera, config, seq, None,  # type: ignore[arg-type]  # duck-typed
                            T_WC_pred=camera_pose(i), last=last)
         inputs = stage.process(f, inputs, ctx)
@@ -91,6 +95,41 @@ def test_both_sided_references_see_what_the_past_never_did():
     assert psnr(both.restored_rgb, truth, hole) > psnr(causal.restored_rgb, truth, hole) + 5
     magenta = np.all(both.restored_rgb[hole] == MAGENTA, axis=1)
     assert magenta.mean() < 0.01  # the future frames' person (elsewhere) is never copied
+
+
+def passer_by(index: int) -> np.ndarray:
+    """bool (H, W): the mask segmentation gives of a person walking right to left past the target's hole."""
+    m = np.zeros((H, W), bool)
+    x = 230 - 10 * index  # frame 10: columns 130-200
+    m[40:220, x:x + 70] = True
+    return m
+
+
+class FringeSequence(WallSequence):
+    """The passer-by drawn 6 px wider than its mask: the outline segmentation misses."""
+
+    def __getitem__(self, index: int) -> Frame:
+        rgb, depth = render(camera_pose(index), self.tex)
+        m = cv2.dilate(passer_by(index).astype(np.uint8), np.ones((13, 13), np.uint8)) > 0
+        rgb, depth = rgb.copy(), depth.copy()
+        rgb[m], depth[m] = MAGENTA, 1.2
+        return Frame(index, index / 30.0, rgb, depth)
+
+
+def test_a_references_unmasked_fringe_is_not_copied():
+    """Past frames see the wall behind the target's hole, but their own passer-by's fringe, outside its mask,
+    lands in the hole too: widening the references' masks (`reference_margin_px`, default 8) keeps it out."""
+    hole = passer_by(TARGET)
+    widened, _, truth = run_stage("causal", FringeSequence(), passer_by)
+    raw, _, _ = run_stage("causal", FringeSequence(), passer_by, {"restoration.reference_margin_px": 0})
+    assert widened.restored_rgb is not None and raw.restored_rgb is not None
+
+    def magenta(rgb: np.ndarray) -> float:
+        return float(np.all(rgb[hole] == MAGENTA, axis=1).mean())
+
+    assert magenta(raw.restored_rgb) > 0.01  # the fringe, copied
+    assert magenta(widened.restored_rgb) == 0.0
+    assert psnr(widened.restored_rgb, truth, hole) > psnr(raw.restored_rgb, truth, hole) + 3
 
 
 def test_future_pose_and_moving_pixels_from_geometry():
