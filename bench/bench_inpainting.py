@@ -20,17 +20,21 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import sys
 import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from worker.slam.camera import parse_camera
-from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
-from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, restore_frame
-from worker.slam.io.sequence import Sequence
-from worker.slam.truth import load_truth, restoration_psnr
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # this checkout's code, not the installed one's (a worktree measuring "before")
+
+from worker.slam.camera import parse_camera  # noqa: E402
+from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references  # noqa: E402
+from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, restore_frame  # noqa: E402
+from worker.slam.io.sequence import Sequence  # noqa: E402
+from worker.slam.truth import load_truth, restoration_psnr  # noqa: E402
 
 
 def bench_sequence(root: Path, camera: str, n_frames: int, both_sided: bool, config: RestorationConfig,
