@@ -246,7 +246,7 @@ def _relative_pose(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndar
         if pose is not None:
             return pose
     got = sqpnp_ransac(X, uv, K, config.pnp_px, 300, 6, config.usac, segmented and config.ap3p_samples)
-    if got is None or segmented and len(got[2]) < config.min_pose_support * len(X):
+    if got is None or (segmented and len(got[2]) < config.min_pose_support * len(X)):
         return None
     return got[0], got[1]
 

@@ -310,7 +310,9 @@ def _overlay(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 
 def _widen(mask: np.ndarray, px: int) -> np.ndarray:
-    """`mask` (H, W) bool dilated by `px` pixels (a square: one separable pass)."""
+    """`mask` (H, W) bool dilated by `px` pixels, a square (one separable pass). Not culling's
+    `dilate_disc`: inpainting may not import its floor, and a disc of radius 8 kept more of the fringe (restored
+    keyframes 0.1-0.2 dB lower on six of nine development sequences, one depth error 4.4 -> 5.2 cm)."""
     if px <= 0 or not mask.any():
         return mask
     return cv2.dilate(mask.astype(np.uint8), np.ones((2 * px + 1, 2 * px + 1), np.uint8)) > 0
