@@ -23,6 +23,7 @@ def _shared_default() -> str:
 
 def train_command(
     config: Annotated[str, typer.Option(help="Preset (cpu-tum = the shipped recipe, cpu-real = real people at scale, "
+                                             "cpu-real-mnv2 = its data on a pretrained MobileNetV2 path, "
                                              "cpu-tum-ft and cpu-real-tum-ft = fine-tunes needing --init, "
                                              "cpu, paper, smoke) or a JSON "
                                              "file (keys of TrainConfig; optional \"preset\" base).")] = "cpu-tum",

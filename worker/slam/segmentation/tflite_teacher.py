@@ -89,3 +89,23 @@ class TfliteSegmenter:
         check_rgb(rgb)
         probs = cv2.resize(self.predict_probs(rgb), (rgb.shape[1], rgb.shape[0]), interpolation=cv2.INTER_LINEAR)
         return SegmentationResult(labels_of(probs), self.classes, self.dynamic_classes, probs)
+
+
+def read_constants(model_path: Path) -> dict[str, np.ndarray]:
+    """The tensors of a float .tflite model that are readable without running it, by name: its weights and
+    biases, to start training from (`msnet.mobilenet.pretrained_state_dict`). Raises SegmentationError for an
+    unreadable file."""
+    from ai_edge_litert.interpreter import Interpreter
+
+    try:
+        interpreter = Interpreter(model_path=str(model_path))
+        interpreter.allocate_tensors()
+    except (ValueError, RuntimeError) as exc:
+        raise SegmentationError(f"cannot load TFLite model {model_path}: {exc}") from exc
+    out = {}
+    for t in interpreter.get_tensor_details():
+        try:
+            out[t["name"]] = np.array(interpreter.tensor(t["index"])())  # weights stay readable after allocation
+        except ValueError:  # an intermediate activation: not allocated outside invoke()
+            continue
+    return out

@@ -53,7 +53,7 @@ def _fake_shared(root: Path) -> Path:
 
 def test_bonn_crowd_dev_is_forbidden_whatever_the_config_says(tmp_path: Path) -> None:
     shared = _fake_shared(tmp_path / "shared")
-    for name in ("cpu-real", "cpu-real-tum-ft", "cpu-tum", "cpu", "smoke"):
+    for name in ("cpu-real-mnv2", "cpu-real", "cpu-real-tum-ft", "cpu-tum", "cpu", "smoke"):
         cfg = replace(presets()[name], shared_dir=str(shared), forbidden=())  # even with an emptied list
         with pytest.raises(ConfigError, match="forbidden"):
             expand(cfg, ("{shared}/data/bonn_crowd_dev/rgb/*.jpg",))

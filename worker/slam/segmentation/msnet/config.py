@@ -35,6 +35,10 @@ class MsnetConfig:
     """Transformer decoder layers (queries = one per class, memory = enhanced C5 tokens)."""
     dropout: float = 0.1
     """Dropout in the Transformer blocks (the paper trains with 0.56)."""
+    cnn: str = "plain"
+    """The pyramid's convolutional path: "plain" = one 3x3 stride-2 conv per level from a two-conv stem (trained
+    from scratch), "mobilenetv2" = the four stages of a width-0.5 MobileNetV2 (`msnet.mobilenet`; three levels,
+    its weights can start from the Apache-2.0 DeepLabV3 teacher's), the PEncoders at `widths` beside them."""
     refine_rank: int = 0
     """The guidance's 3x3 refinement of the stride-4 pixel embedding: 0 = a dense 3x3 conv (about a third of the
     forward on one CPU core), r >= 1 = depthwise 3x3 over r copies of the channels then a 1x1,
@@ -53,6 +57,10 @@ class MsnetConfig:
             raise ConfigError("widths, depths and patch_sizes need one entry per pyramid level")
         if any(s % 32 for s in self.input_size):
             raise ConfigError(f"input_size must be multiples of 32, got {self.input_size}")
+        if self.cnn not in ("plain", "mobilenetv2"):
+            raise ConfigError(f"cnn must be 'plain' or 'mobilenetv2', got {self.cnn!r}")
+        if self.cnn == "mobilenetv2" and len(self.widths) != 3:
+            raise ConfigError("the mobilenetv2 path has three levels (strides 8, 16, 32): give three widths")
         if not 0 <= self.refine_rank <= 9:  # an input channel's (out, 9) kernel slice has rank <= 9
             raise ConfigError(f"refine_rank must be in [0, 9], got {self.refine_rank}")
         if not 0.0 <= self.dropout < 1.0:

@@ -37,9 +37,11 @@ class MSNet(nn.Module):
         self.enhancement = FeatureEnhancement(cfg)
         self.guidance = FeatureGuidance(cfg.embed_dim, cfg.stem_channels, cfg.refine_rank)
         self.head = ClassMaskHead()
-        # ImageNet statistics: inputs are uint8-derived RGB in [0, 1].
-        self.register_buffer("mean", torch.tensor([0.485, 0.456, 0.406]).view(1, 3, 1, 1), persistent=False)
-        self.register_buffer("std", torch.tensor([0.229, 0.224, 0.225]).view(1, 3, 1, 1), persistent=False)
+        # Inputs are uint8-derived RGB in [0, 1]: ImageNet statistics, or [-1, 1] as the MobileNetV2 was trained.
+        mean, std = ([0.5] * 3, [0.5] * 3) if cfg.cnn == "mobilenetv2" else ([0.485, 0.456, 0.406],
+                                                                             [0.229, 0.224, 0.225])
+        self.register_buffer("mean", torch.tensor(mean).view(1, 3, 1, 1), persistent=False)
+        self.register_buffer("std", torch.tensor(std).view(1, 3, 1, 1), persistent=False)
 
     def forward_features(self, x: torch.Tensor) -> MsnetFeatures:
         """x (B, 3, H, W) RGB in [0, 1]."""

@@ -78,6 +78,11 @@ class TrainConfig:
     init_weights: str | None = None
     """Start from the weights of this checkpoint (as saved by this trainer, e.g. an earlier run's `msnet.pt`)
     instead of a random initialisation: fine-tuning. Its architecture must equal `model`. Ignored on resume."""
+    init_pretrained: str | None = None
+    """A float DeepLabV3-MobileNetV2 .tflite (Apache-2.0) whose MobileNetV2 weights start the pyramid's CNN path
+    when `model.cnn` is "mobilenetv2" (the rest starts random). Ignored with `init_weights` or on resume."""
+    pretrained_lr_scale: float = 1.0
+    """Learning rate of the `init_pretrained` layers relative to `lr` (below 1 keeps them nearer their start)."""
     out_dir: str = "runs/msnet"
     """Checkpoints (`last.pt` for resume, `msnet.pt` weights) and `metrics.jsonl`."""
     epochs: int = 40
@@ -155,7 +160,9 @@ def _from_dict(base: TrainConfig, data: dict) -> TrainConfig:
 
 
 def presets() -> dict[str, TrainConfig]:
-    """`cpu-real`: real people at scale (issue 20; the recipe for the next checkpoint, 3 h on this CPU).
+    """`cpu-real-mnv2`: `cpu-real-tum-ft`'s data on a pyramid whose CNN path starts from the teacher's
+    MobileNetV2 (issue 20's allowed pretrained initialisation).
+    `cpu-real`: real people at scale (issue 20; the recipe for the next checkpoint, 3 h on this CPU).
     `cpu-real-tum-ft`: a `cpu-real` run fine-tuned with the TUM halfsphere frames (needs `init_weights`).
     `cpu-tum`: the recipe of the shipped checkpoint (adds teacher distillation on the TUM walking_halfsphere
     frames). `cpu-tum-ft`: a fine-tuning experiment on top of it (needs `init_weights`, a `cpu-tum` msnet.pt).
@@ -187,7 +194,13 @@ def presets() -> dict[str, TrainConfig]:
     cpu_real_tum_ft = replace(cpu_real, time_budget_min=30.0, lr=5e-4, warmup_fraction=0.02, seed=1,
                               target_frames=(halfsphere,), p_target=0.25, p_labelled=0.35, p_target_background=0.3,
                               bn_extra_frames=(halfsphere,))
+    # `cpu-real-tum-ft`'s data from the start, the pyramid's CNN path a MobileNetV2 initialised from the 257
+    # teacher's (Apache-2.0) and trained at a fifth of the rate of the layers that start random.
+    cpu_real_mnv2 = replace(cpu_real_tum_ft, time_budget_min=80.0, lr=1e-3, warmup_fraction=0.03, seed=0,
+                            model=replace(cpu.model, cnn="mobilenetv2", refine_rank=2),
+                            init_pretrained=cpu.teacher, pretrained_lr_scale=0.2)
     return {
+        "cpu-real-mnv2": cpu_real_mnv2,
         "cpu-real": cpu_real,
         "cpu-real-tum-ft": cpu_real_tum_ft,
         "cpu-tum": cpu_tum,

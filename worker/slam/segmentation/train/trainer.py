@@ -19,8 +19,10 @@ from worker.slam.errors import ConfigError
 from worker.slam.io.images import read_rgb
 from worker.slam.segmentation.evaluate import confusion, metrics_from_confusion
 from worker.slam.segmentation.msnet.checkpoint import load_model, save_model
+from worker.slam.segmentation.msnet.mobilenet import pretrained_state_dict
 from worker.slam.segmentation.msnet.model import MSNet, build_msnet
 from worker.slam.segmentation.msnet.segmenter import pick_device
+from worker.slam.segmentation.tflite_teacher import read_constants
 from worker.slam.segmentation.train.bn_recalibration import recalibrate_bn
 from worker.slam.segmentation.train.config import TrainConfig
 from worker.slam.segmentation.train.data import build_training_data, expand, find_backgrounds
@@ -108,6 +110,26 @@ def evaluate_all(model: MSNet, data, device: torch.device) -> dict:
     return record
 
 
+def load_pretrained_cnn(model: MSNet, tflite: Path) -> None:
+    """The MobileNetV2 stages of a "mobilenetv2" pyramid from a DeepLabV3-MobileNetV2 .tflite (its BN folded)."""
+    if model.cfg.cnn != "mobilenetv2":
+        raise ConfigError("init_pretrained needs model.cnn = 'mobilenetv2'", detail={"cnn": model.cfg.cnn})
+    try:
+        state = pretrained_state_dict(read_constants(tflite))
+    except KeyError as exc:
+        raise ConfigError(f"{tflite} holds no DeepLabV3-MobileNetV2 (width 0.5) weights: {exc} missing") from exc
+    model.backbone.cnn_stages().load_state_dict(state)
+
+
+def param_groups(model: MSNet, cfg: TrainConfig) -> list[dict]:
+    """The pretrained CNN path at `pretrained_lr_scale` x the rate (when it starts pretrained), the rest at 1x."""
+    if not cfg.init_pretrained or cfg.init_weights or cfg.pretrained_lr_scale == 1.0:
+        return [{"params": list(model.parameters()), "lr_scale": 1.0}]
+    cnn = {id(p) for p in model.backbone.cnn_stages().parameters()}
+    return [{"params": [p for p in model.parameters() if id(p) in cnn], "lr_scale": cfg.pretrained_lr_scale},
+            {"params": [p for p in model.parameters() if id(p) not in cnn], "lr_scale": 1.0}]
+
+
 def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path:
     """Train MSNET as `cfg` says; returns the path of the weights-only checkpoint (`out_dir/msnet.pt`)."""
     out = Path(cfg.out_dir)
@@ -125,7 +147,9 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
             raise ConfigError(f"init_weights {cfg.init_weights}: its architecture differs from the config's model")
         model.load_state_dict(start.state_dict())
         model.train()
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    elif cfg.init_pretrained and not (resume and (Path(cfg.out_dir) / "last.pt").is_file()):
+        load_pretrained_cnn(model, cfg.path(cfg.init_pretrained))
+    opt = torch.optim.AdamW(param_groups(model, cfg), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = max(cfg.samples_per_epoch // cfg.batch_size, 1)
     total_steps = steps_per_epoch * cfg.epochs
     ema = AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(cfg.ema_decay), use_buffers=True) \
@@ -163,7 +187,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
                 break
             lr = cfg.lr * lr_factor(done, cfg.warmup_fraction)
             for group in opt.param_groups:
-                group["lr"] = lr
+                group["lr"] = lr * group.get("lr_scale", 1.0)  # absent in the optimiser state of older runs
             step += 1
             batch = {k: v.to(device) for k, v in batch.items()}
             loss, parts = msnet_loss(model(batch["image"]), batch["hard"], batch["soft"], batch["kd_mask"], weights,
