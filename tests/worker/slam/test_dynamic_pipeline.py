@@ -102,6 +102,20 @@ def test_culling_gives_band_keypoints_back_rather_than_starve_the_tracker():
     assert np.array_equal(stage._readmit(removed, uv, dynamic, {}), removed)
 
 
+def test_refill_extracts_the_frame_again_outside_the_exclusion_mask(dyn_seq, tmp_path):
+    """`refill_below` 1.0 refills every frame that culling thinned: the room is extracted alone and, no longer
+    sharing ORB's budget with the people, gives the tracker more keypoints than culling kept; 0 never refills."""
+    cfg = get_preset("no-restoration", {"segmentation": {"source": "truth"}, "culling": {"refill_below": 1.0}})
+    m = run_pipeline(Sequence(dyn_seq), cfg, tmp_path).metrics
+    assert m["tracked"] == 45 and m["culling"]["frames_refilled"] >= 40
+    with (tmp_path / "frame_stats.csv").open() as fh:
+        rows = [r for r in csv.DictReader(fh) if r.get("features_refilled")]
+    assert len(rows) == m["culling"]["frames_refilled"]
+    assert np.mean([int(r["features_refilled"]) for r in rows]) > np.mean([int(r["features_kept"]) for r in rows])
+    off = get_preset("no-restoration", {"segmentation": {"source": "truth"}, "culling": {"refill_below": 0.0}})
+    assert run_pipeline(Sequence(dyn_seq), off, tmp_path / "off").metrics["culling"]["frames_refilled"] == 0
+
+
 @pytest.fixture(scope="module")
 def issue_seq(shared, tmp_path_factory):
     """`vtdslam synth OUT --frames 60 --people 2 --seed 2` (walking_xyz's camera path, hence `shared`)."""
