@@ -159,5 +159,10 @@ def test_masks_over_ninety_percent_of_the_view_do_not_starve_the_tracker(issue_s
     rescued = metrics(True)
     assert rescued["tracked"] == 60 and rescued["rescued_frames"] > 0
     assert rescued["ate"]["rmse"] < 0.03  # 0.0135 m when written (0.0235 m, 30 frames lost, without the rescue)
+    # culling's refill (on by default) re-extracts starved later frames, never the unjudged first one: a map
+    # started on the tenth of the view outside the marks lost frame 1
+    assert rescued["culling"]["frames_refilled"] > 0
+    with (tmp_path / "True" / "frame_stats.csv").open() as fh:
+        assert next(csv.DictReader(fh))["features_refilled"] == ""
     starved = metrics(False)
     assert starved["tracked"] <= 45 and starved["rescued_frames"] == 0

@@ -61,16 +61,16 @@ class CullingStageConfig:
     not on, dynamic objects) are given back in the extractor's order (counted as `features_readmitted`). It
     rescues a wide band (`dilation_px` 15); with the narrow default band it was mixed and hurt `geometry-only`,
     so it is off. 0 = off."""
-    refill_below: float = valid(0.0, 0.0, 1.0)
+    refill_below: float = valid(0.5, 0.0, 1.0)
     """When culling leaves fewer than this share of `features.n_features`, the frame's keypoints are extracted
     again outside the exclusion mask and replace the kept ones (counted as `frames_refilled`). ORB keeps the
     image's strongest corners before the grid spreads them, so a textured person can take 80-90 % of a frame's
     budget and leave the pale room around it a hundred keypoints; extracted alone, the room gives the full
-    budget. 0 = off (the default). 0.5, the only value tried: development mean 0.0268 -> 0.0262 m and augmented
-    seed 7 tracked whole (293 -> 300 frames), Bonn unchanged within noise, but the test sequence whose masks cover
-    90 % of every view lost one frame (59 of 60), so it stays off until it adds keypoints instead of replacing
-    them (README "MSNET segmentation"). Only with segmentation: `geometry-only`'s exclusion is culling's alone,
-    and refilling around it cost its development mean 0.1145 -> 0.1200 m."""
+    budget. Only frames culling compared (not the first) and only with segmentation: `geometry-only`'s
+    exclusion is culling's alone, and refilling around it cost its development mean 0.1145 -> 0.1200 m. 0.5,
+    the only value tried, against 0 (README "MSNET segmentation", 2026-12-05): development mean 0.0268 ->
+    0.0262 m, 2893 -> 2900/2900 tracked; true-mask oracle on the eight augmented seeds 0.0290 -> 0.0264 m,
+    2396 -> 2400/2400. Adding the refilled keypoints to the kept ones instead was worse (0.0275 m). 0 = off."""
 
 
 @dataclass
@@ -197,9 +197,11 @@ class CullingStage:
             removed = mask_at(inputs.exclude_mask, feats.uv)
         inputs.features = feats.select(~removed)
         starved = (~removed).sum() < self.cfg.refill_below * self.extractor.cfg.n_features
-        if self.use_segmentation and inputs.exclude_mask is not None and starved:
+        # not on a first frame: its exclusion is the unjudged network mask, and a map started on the few
+        # keypoints outside it finds too few of them in the next frame (the 90 %-masked test lost frame 1)
+        if self.use_segmentation and self.last is not None and starved:
             inputs.features = self.extractor.extract(cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY), frame.depth,
-                                                     inputs.exclude_mask)
+                                                     self.last.exclude_mask)
             inputs.info["features_refilled"] = len(inputs.features)
             self.refilled += 1
         inputs.held_back = feats.select(removed) if removed.any() else None
