@@ -74,6 +74,7 @@
       ["Relocalisations", m.relocalisations, 0, ""], ["New maps after a loss", m.new_maps, 0, ""],
       ["Maps merged back", m.map_merges, 0, ""], ["Poses from established points", m.established_switches, 0, ""],
       ["Frames rescued by held-back keypoints", m.rescued_frames, 0, ""],
+      ["Frames re-extracted around moving objects", dig(m, "culling", "frames_refilled"), 0, ""],
       ["Keyframes", m.keyframes, 0, ""], ["Loops closed", m.loops_applied, 0, ""],
       ["Poses matched to ground truth", m.matched_poses, 0, ""], ["Speed, whole pipeline", m.fps, 2, "frames/s"],
       ["Speed, tracking only", m.tracking_fps, 2, "frames/s"], ["Map points", m.map_points, 0, ""],
