@@ -18,10 +18,10 @@ from worker.slam.features.types import Features
 class OrbExtractor:
     def __init__(self, cfg: FeatureConfig) -> None:
         self.cfg = cfg
-        # Over-detect (x3) so the grid has candidates in weak cells; only kept ones get descriptors.
+        # Over-detect so the grid has candidates in weak cells; only kept ones get descriptors.
         self._orb = cv2.ORB_create(  # type: ignore[attr-defined]  # (absent from OpenCV 5's stubs)
-            nfeatures=cfg.n_features * 3, scaleFactor=cfg.scale_factor, nlevels=cfg.n_levels, edgeThreshold=19,
-            fastThreshold=cfg.fast_threshold, scoreType=cv2.ORB_HARRIS_SCORE, patchSize=31)
+            nfeatures=cfg.n_features * cfg.overdetect, scaleFactor=cfg.scale_factor, nlevels=cfg.n_levels,
+            edgeThreshold=19, fastThreshold=cfg.fast_threshold, scoreType=cv2.ORB_HARRIS_SCORE, patchSize=31)
         self.scales = cfg.scale_factor ** np.arange(cfg.n_levels)
         #: (levels,) inverse variance of a keypoint's position, 1/scale^2 (ORB-SLAM2's invSigma2).
         self.inv_sigma2 = 1.0 / self.scales**2
