@@ -143,7 +143,11 @@ class CullingStage:
     def prepare(self, frame: Frame) -> Features:
         """The frame's ORB features, from the frame alone: the pipeline may extract them ahead on another thread
         while the frame before is culled and tracked (the tracker uses them; it extracts nothing itself)."""
-        return self.extractor.extract(cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY), frame.depth)
+        return self._extract(frame)
+
+    def _extract(self, frame: Frame, exclude: np.ndarray | None = None) -> Features:
+        """The frame's ORB features outside `exclude` (H, W) bool, if given."""
+        return self.extractor.extract(cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY), frame.depth, exclude)
 
     def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
         if self.scores is None and ctx.truth is not None:
@@ -200,8 +204,7 @@ class CullingStage:
         # not on a first frame: its exclusion is the unjudged network mask, and a map started on the few
         # keypoints outside it finds too few of them in the next frame (the 90 %-masked test lost frame 1)
         if self.use_segmentation and self.last is not None and starved:
-            inputs.features = self.extractor.extract(cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY), frame.depth,
-                                                     self.last.exclude_mask)
+            inputs.features = self._extract(frame, self.last.exclude_mask)
             inputs.info["features_refilled"] = len(inputs.features)
             self.refilled += 1
         inputs.held_back = feats.select(removed) if removed.any() else None
