@@ -46,6 +46,9 @@ class CameraPreset:
     """OpenCV coefficients (k1, k2, p1, p2, k3) of the colour image."""
     width: int = 640
     height: int = 480
+    depth_registered: bool = True
+    """Depth pixels are registered to the colour pixels (the driver reprojected them: TUM, Bonn); False when the
+    dataset ships the depth camera's own images (7-Scenes)."""
 
 
 CAMERA_PRESETS: dict[str, CameraPreset] = {
@@ -56,6 +59,7 @@ CAMERA_PRESETS: dict[str, CameraPreset] = {
     # Bonn RGB-D Dynamic (its documented intrinsics; k3 not given).
     "bonn": CameraPreset(542.822841, 542.576870, 315.593520, 237.756098, 5000.0,
                          dist=(0.039903, -0.099343, -0.000730, -0.000144, 0.0)),
-    # Microsoft 7-Scenes nominal depth intrinsics; depth in millimetres.
-    "7scenes": CameraPreset(585.0, 585.0, 320.0, 240.0, 1000.0),
+    # Microsoft 7-Scenes nominal depth intrinsics; depth in millimetres, from the Kinect's depth camera and not
+    # registered to colour (the dataset says so): a keypoint's depth may be a neighbouring surface's.
+    "7scenes": CameraPreset(585.0, 585.0, 320.0, 240.0, 1000.0, depth_registered=False),
 }

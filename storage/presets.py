@@ -31,7 +31,7 @@ MAX_DIST = 10.0
 DEFAULT_SIZE = (640, 480)
 """The image size intrinsics refer to when they give none (every camera preset's)."""
 _CAMERA_NUMBERS = ("fx", "fy", "cx", "cy", "depth_scale")
-_CAMERA_FIELDS = {*_CAMERA_NUMBERS, "width", "height", "dist", "name"}
+_CAMERA_FIELDS = {*_CAMERA_NUMBERS, "width", "height", "dist", "name", "depth_registered"}
 
 
 def check_preset(name: str) -> str:
@@ -48,7 +48,8 @@ def parse_camera_spec(spec: str | dict[str, Any]) -> dict[str, Any]:
     """A camera preset name or explicit intrinsics (a JSON object or dict), checked and normalised.
 
     Returns what ``Sequence.camera`` stores and the worker turns into its camera: ``{"preset": name}``
-    or the intrinsics ``{"fx", "fy", "cx", "cy", "depth_scale"?, "width"?, "height"?, "dist"?, "name"?}``.
+    or the intrinsics ``{"fx", "fy", "cx", "cy", "depth_scale"?, "width"?, "height"?, "dist"?, "name"?,
+    "depth_registered"?}``.
     """
     if isinstance(spec, str):
         text = spec.strip()
@@ -95,6 +96,11 @@ def check_intrinsics(d: dict[str, Any]) -> dict[str, Any]:
         out["dist"] = [_finite(v, "dist") for v in dist]
         if any(abs(v) > MAX_DIST for v in out["dist"]):
             raise InvalidInput(f"camera dist coefficients must be within -{MAX_DIST}..{MAX_DIST}", {"dist": dist})
+    if "depth_registered" in d:
+        if not isinstance(d["depth_registered"], bool):
+            raise InvalidInput("camera depth_registered must be true or false",
+                               {"depth_registered": str(d["depth_registered"])[:64]})
+        out["depth_registered"] = d["depth_registered"]
     _check_plausible(out)
     if "name" in d:
         out["name"] = str(d["name"])[:64]

@@ -13,7 +13,7 @@ from worker.slam.errors import CameraError
 
 @dataclass(frozen=True)
 class Camera:
-    """Intrinsics of a registered RGB-D pair.
+    """Intrinsics of an RGB-D pair (depth normally registered to colour, see `depth_registered`).
 
     Depth PNG value / `depth_scale` = metres (TUM, Bonn: 5000; 7-Scenes: 1000).
     `dist` are OpenCV coefficients (k1, k2, p1, p2, k3) of the colour image.
@@ -28,6 +28,10 @@ class Camera:
     height: int = 480
     dist: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
     name: str = "custom"
+    depth_registered: bool = True
+    """Depth pixels lie on the colour pixels that see the same point (the driver registered them, as for TUM,
+    Bonn and most RGB-D cameras); False for raw depth-camera images (7-Scenes). Sets how much keypoint depth
+    weighs in pose optimisation (`tracking.virtual_baseline_m` / `unregistered_baseline_m`)."""
 
     def __post_init__(self) -> None:
         vals = (self.fx, self.fy, self.cx, self.cy, self.depth_scale)
@@ -37,6 +41,8 @@ class Camera:
             raise CameraError(f"camera size must be positive, got {self.width}x{self.height}")
         if len(self.dist) != 5:
             raise CameraError(f"dist needs 5 coefficients (k1 k2 p1 p2 k3), got {len(self.dist)}")
+        if not isinstance(self.depth_registered, bool):
+            raise CameraError(f"depth_registered must be true or false, got {self.depth_registered!r}")
 
     @property
     def K(self) -> np.ndarray:
@@ -83,7 +89,8 @@ class Camera:
 
 
 PRESETS: dict[str, Camera] = {
-    name: Camera(c.fx, c.fy, c.cx, c.cy, c.depth_scale, c.width, c.height, c.dist, name=name)
+    name: Camera(c.fx, c.fy, c.cx, c.cy, c.depth_scale, c.width, c.height, c.dist, name=name,
+                 depth_registered=c.depth_registered)
     for name, c in CAMERA_PRESETS.items()
 }
 """The supported datasets' cameras by preset name (their intrinsics live in `formats.catalog`)."""

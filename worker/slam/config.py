@@ -70,10 +70,14 @@ class TrackingConfig:
     """Best/second-best distance ratio in projection search (1 disables the test)."""
     min_matches: int = valid(30, 4, 100_000)
     """Fewer inliers than this after pose optimisation means tracking is lost."""
-    virtual_baseline_m: float = valid(0.01, 0.0001, 10.0)
+    virtual_baseline_m: float = valid(0.08, 0.0001, 10.0)
     """Virtual stereo baseline that turns depth into a third (right-image) reprojection residual; it sets
-    how much keypoint depth weighs in pose optimisation. ORB-SLAM2 uses ~0.08 on TUM; 7-Scenes' colour and depth
-    are not exactly registered, so its depth deserves less weight (README, "Settings chosen by measurement")."""
+    how much keypoint depth weighs in pose optimisation: ORB-SLAM2's ~0.08 (TUM), for cameras whose depth is
+    registered to colour (`Camera.depth_registered`). On the synthetic rooms it halves the ATE against 0.01
+    (README, "Settings chosen by measurement")."""
+    unregistered_baseline_m: float = valid(0.01, 0.0001, 10.0)
+    """The same for cameras whose depth is not registered to colour (7-Scenes): a keypoint's depth may belong
+    to a neighbouring surface, so it weighs less (static 7-Scenes: 0.0224 m here against 0.0260 at 0.08)."""
     huber_px: float = valid(2.45, 0.01, 1000.0)
     """Huber threshold (pixels) of the robust kernel, sqrt of the 2-dof 95% chi-square (5.99)."""
     ba_rounds: int = valid(4, 1, 100)

@@ -36,5 +36,5 @@ def inspect_sequence(folder: Path, camera: str | dict | Camera | None = None, sa
         "gt_poses": len(seq.groundtruth) if seq.groundtruth is not None else 0,
         "gt_coverage": round(len(gt_idx) / len(seq), 4),
         "camera": f"{c.name} ({seq.camera_source}) fx={c.fx:g} fy={c.fy:g} cx={c.cx:g} cy={c.cy:g} "
-                  f"scale={c.depth_scale:g}",
+                  f"scale={c.depth_scale:g}" + ("" if c.depth_registered else " depth not registered to colour"),
     }

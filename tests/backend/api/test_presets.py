@@ -38,6 +38,8 @@ def test_camera_specs():
     assert parse_camera_spec("tum3") == {"preset": "tum3"}
     assert parse_camera_spec('{"fx": 500, "fy": 500, "cx": 320, "cy": 240, "dist": [0, 0, 0, 0]}') == {
         "fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0, "dist": [0.0, 0.0, 0.0, 0.0]}
+    assert parse_camera_spec('{"fx": 500, "fy": 500, "cx": 320, "cy": 240, "depth_registered": false}') == {
+        "fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0, "depth_registered": False}
     for bad in ["tum9", "{", '{"fx": 1}', '{"fx": -1, "fy": 1, "cx": 1, "cy": 1}', '{"fx": 1, "fy": 1, "cx": 1, '
                 '"cy": 1, "zoom": 2}', "[1, 2]", '{"fx": true, "fy": 1, "cx": 1, "cy": 1}']:
         with pytest.raises(InvalidInput):

@@ -47,6 +47,7 @@ def test_an_unsampled_frame_of_another_size_is_refused(seq) -> None:
     ({"cy": -3.0}, "cy must"),
     ({"depth_scale": 1e-9}, "depth_scale must be within"),
     ({"dist": [1e9, 0, 0, 0]}, "dist coefficients"),
+    ({"depth_registered": "no"}, "depth_registered must be true or false"),
 ])
 def test_implausible_intrinsics_are_refused_in_camera_json_and_specs(seq, change, fragment) -> None:
     camera = {**CAMERA, **change}

@@ -44,7 +44,8 @@ class Tracker:
         self.cfg = cfg
         self.tc = cfg.tracking
         self.K = camera.K
-        self.bf = camera.fx * cfg.tracking.virtual_baseline_m
+        baseline = self.tc.virtual_baseline_m if camera.depth_registered else self.tc.unregistered_baseline_m
+        self.bf = camera.fx * baseline
         self.extractor = OrbExtractor(cfg.features)
         self.map = slam_map if slam_map is not None else Map()
         self.motion = ConstantVelocityModel()
