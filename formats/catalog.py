@@ -35,7 +35,7 @@ DEFAULT_PIPELINE_PRESET = "full"
 
 @dataclass(frozen=True)
 class CameraPreset:
-    """Pinhole intrinsics of a dataset's registered RGB-D pair; depth PNG value / `depth_scale` = metres."""
+    """Pinhole intrinsics of a dataset's RGB-D pair; depth PNG value / `depth_scale` = metres."""
 
     fx: float
     fy: float

@@ -1,9 +1,7 @@
 import pytest
 
 from worker.slam.camera import PRESETS, Camera, parse_camera
-from worker.slam.config import PipelineConfig
 from worker.slam.errors import CameraError
-from worker.slam.tracking.tracker import Tracker
 
 
 def test_presets_have_documented_values():
@@ -21,13 +19,6 @@ def test_only_seven_scenes_ships_depth_not_registered_to_colour():
     cam = parse_camera('{"fx": 500, "fy": 500, "cx": 320, "cy": 240, "depth_registered": false}')
     assert not cam.depth_registered and Camera.from_dict(cam.to_dict()) == cam
     assert parse_camera('{"fx": 500, "fy": 500, "cx": 320, "cy": 240}').depth_registered
-
-
-def test_unregistered_depth_weighs_less_in_pose_optimisation():
-    cfg = PipelineConfig()
-    assert Tracker(PRESETS["tum3"], cfg).bf == pytest.approx(535.4 * cfg.tracking.virtual_baseline_m)
-    assert Tracker(PRESETS["7scenes"], cfg).bf == pytest.approx(585.0 * cfg.tracking.unregistered_baseline_m)
-    assert cfg.tracking.unregistered_baseline_m < cfg.tracking.virtual_baseline_m
 
 
 @pytest.mark.parametrize("spec", ["nope", '{"fx": -1, "fy": 1, "cx": 1, "cy": 1}', '{"fx": 1', '{"f": 1}',
