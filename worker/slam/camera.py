@@ -89,8 +89,7 @@ class Camera:
 
 
 PRESETS: dict[str, Camera] = {
-    name: Camera(c.fx, c.fy, c.cx, c.cy, c.depth_scale, c.width, c.height, c.dist, name=name,
-                 depth_registered=c.depth_registered)
+    name: Camera(**asdict(c), name=name)
     for name, c in CAMERA_PRESETS.items()
 }
 """The supported datasets' cameras by preset name (their intrinsics live in `formats.catalog`)."""

@@ -160,7 +160,8 @@ class CullingStage:
         last = ctx.last
         if self.history and last is not None and last.index == self.history[-1].index:
             self.history[-1].T_WC = last.T_WC
-        if self.history and len(feats):
+        compared = bool(self.history) and len(feats) > 0
+        if compared:
             past = self.history[0]  # the oldest kept: `lag_frames` back
             prev_feats, prev_depth = past.feats, past.depth
             cov = last.covariance if last is not None else None
@@ -201,10 +202,10 @@ class CullingStage:
             removed = mask_at(inputs.exclude_mask, feats.uv)
         inputs.features = feats.select(~removed)
         starved = (~removed).sum() < self.cfg.refill_below * self.extractor.cfg.n_features
-        # not on a first frame: its exclusion is the unjudged network mask, and a map started on the few
-        # keypoints outside it finds too few of them in the next frame (the 90 %-masked test lost frame 1)
-        if self.use_segmentation and self.last is not None and starved:
-            inputs.features = self._extract(frame, self.last.exclude_mask)
+        # only frames culling compared: a first frame's exclusion is the unjudged network mask, and a map started
+        # on the few keypoints outside it finds too few of them in the next frame (the 90 %-masked test lost frame 1)
+        if self.use_segmentation and compared and starved:
+            inputs.features = self._extract(frame, inputs.exclude_mask)
             inputs.info["features_refilled"] = len(inputs.features)
             self.refilled += 1
         inputs.held_back = feats.select(removed) if removed.any() else None
