@@ -23,6 +23,7 @@ from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig
 from worker.slam.features.depth import backproject, lookup_depth
 from worker.slam.features.orb import OrbExtractor
+from worker.slam.features.projection import search_by_projection
 from worker.slam.features.search import KeypointIndex
 from worker.slam.features.types import Features
 from worker.slam.geometry.pose_optimizer import PoseEstimate, optimize_pose
@@ -32,7 +33,6 @@ from worker.slam.map.map import Map
 from worker.slam.tracking.inputs import TrackInputs
 from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
 from worker.slam.tracking.motion import ConstantVelocityModel
-from worker.slam.tracking.projection import search_by_projection
 from worker.slam.tracking.recovery import LossAction, after_loss, can_start_map
 from worker.slam.tracking.relocalization import older_map_candidates, pnp_against_keyframe, relocalisation_candidates
 from worker.slam.tracking.result import TrackResult
