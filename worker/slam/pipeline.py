@@ -122,7 +122,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     tracker = Tracker(camera, config)
     smap = tracker.map
     mapper = LocalMapper(smap, config.mapping, camera.K, tracker.bf, tracker.extractor.inv_sigma2,
-                         config.tracking.huber_px)
+                         config.tracking.huber_px, (camera.width, camera.height))
     closer = (LoopCloser(smap, config.loop, camera.K, tracker.bf, tracker.extractor.inv_sigma2)
               if config.loop.enabled else None)
     run_ctx = StageContext(camera, config, sequence, load_truth(sequence.root))
@@ -225,7 +225,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
         "relocalisations": n_reloc, "new_maps": n_new_maps, "map_merges": n_merges,
         "established_switches": tracker.established_switches,
         "rescued_frames": tracker.rescued_frames, "last_pose_retries": tracker.last_pose_retries,
-        "keyframes": len(smap), "map_points": smap.points.n_alive,
+        "keyframes": len(smap), "map_points": smap.points.n_alive, "fused_observations": mapper.fused,
         "loops": closer.n_loops if closer else 0, "loops_applied": closer.n_applied if closer else 0,
         "fps": round(total / loop_s, 2) if loop_s > 0 else None,
         "tracking_fps": round(1000.0 / np.mean(timer.ms["tracking"]), 2) if timer.ms["tracking"] else None,

@@ -69,7 +69,8 @@ def turn_run():
                                   # exact synthetic depth deserves the full (ORB-SLAM2) depth weight
                                   "tracking": {"keyframe_max_frames": 5, "virtual_baseline_m": 0.08}})
     tr = Tracker(CAM, cfg)
-    mapper = LocalMapper(tr.map, cfg.mapping, CAM.K, tr.bf, tr.extractor.inv_sigma2, cfg.tracking.huber_px)
+    mapper = LocalMapper(tr.map, cfg.mapping, CAM.K, tr.bf, tr.extractor.inv_sigma2, cfg.tracking.huber_px,
+                         (CAM.width, CAM.height))
     closer = LoopCloser(tr.map, cfg.loop, CAM.K, tr.bf, tr.extractor.inv_sigma2)
     est = []
     for i, T in enumerate(poses):

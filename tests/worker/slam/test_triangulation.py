@@ -20,7 +20,8 @@ def _map_room(neighbours: int) -> tuple[Tracker, LocalMapper, np.ndarray, np.nda
     cfg = get_preset("orb-only")
     cfg = replace(cfg, mapping=replace(cfg.mapping, triangulate_neighbours=neighbours, new_point_max_depth_m=2.5))
     tr = Tracker(CAM, cfg)
-    mapper = LocalMapper(tr.map, cfg.mapping, CAM.K, tr.bf, tr.extractor.inv_sigma2, cfg.tracking.huber_px)
+    mapper = LocalMapper(tr.map, cfg.mapping, CAM.K, tr.bf, tr.extractor.inv_sigma2, cfg.tracking.huber_px,
+                         (CAM.width, CAM.height))
     poses = trajectory(40, yaw_span_deg=30)
     made: list[np.ndarray] = []
     for i, T in enumerate(poses):

@@ -1,4 +1,5 @@
-"""Local mapping run on each new keyframe: map-point culling, then local bundle adjustment."""
+"""Local mapping run on each new keyframe: map-point culling, triangulation, fusion with the covisible
+keyframes, then local bundle adjustment."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,6 +7,7 @@ import numpy as np
 from worker.slam.config import MappingConfig
 from worker.slam.map.keyframe import KeyFrame
 from worker.slam.map.map import Map
+from worker.slam.mapping.fuse import FuseGeometry, fuse_neighbours
 from worker.slam.mapping.local_ba import BAStats, local_bundle_adjust
 from worker.slam.mapping.triangulation import triangulate_new_points
 
@@ -32,14 +34,17 @@ def cull_points(slam_map: Map, kf_id: int, cfg: MappingConfig) -> int:
 
 class LocalMapper:
     def __init__(self, slam_map: Map, cfg: MappingConfig, K: np.ndarray, bf: float, inv_sigma2: np.ndarray,
-                 huber_px: float) -> None:
+                 huber_px: float, size: tuple[int, int]) -> None:
+        """`size` = the image's (width, height) px; `inv_sigma2` (levels,) the pyramid's 1/sigma^2 per octave."""
         self.map, self.cfg, self.K, self.bf = slam_map, cfg, K, bf
         self.inv_sigma2, self.huber_px = inv_sigma2, huber_px
         self.n_processed = 0
         self.culled = 0
         self.triangulated = 0
+        self.fused = 0
         # the pyramid's scale factor, from the per-octave 1/sigma^2 it was built with
-        self.scale_factor = float(np.sqrt(inv_sigma2[0] / inv_sigma2[1]))
+        self.scale_factor = float(np.sqrt(inv_sigma2[0] / inv_sigma2[1])) if len(inv_sigma2) > 1 else 1.2
+        self.geometry = FuseGeometry(K, size, 1.0 / np.sqrt(inv_sigma2), inv_sigma2, bf)
         self.last_ba: BAStats | None = None
 
     def process(self, kf: KeyFrame) -> None:
@@ -48,6 +53,9 @@ class LocalMapper:
             self.triangulated += triangulate_new_points(self.map, kf, self.cfg.triangulate_neighbours, self.K,
                                                         self.inv_sigma2, self.scale_factor,
                                                         self.cfg.triangulate_min_parallax_deg)
+        if self.cfg.fuse_neighbours:
+            self.fused += fuse_neighbours(self.map, kf, self.cfg.fuse_neighbours, self.geometry,
+                                          self.cfg.fuse_radius_px, self.cfg.fuse_merge)
         self.n_processed += 1
         if not self.cfg.local_ba or len(self.map) < 2 or self.n_processed % self.cfg.local_ba_every:
             return
