@@ -16,8 +16,9 @@ import numpy as np
 
 from worker.slam.features.projection import search_by_projection
 from worker.slam.features.search import KeypointIndex
+from worker.slam.geometry import reprojection as rp
 from worker.slam.geometry.pose_optimizer import CHI2_MONO, CHI2_STEREO
-from worker.slam.geometry.se3 import inv
+from worker.slam.geometry.se3 import inv, transform
 from worker.slam.map.keyframe import KeyFrame
 from worker.slam.map.map import Map
 
@@ -39,19 +40,13 @@ class FuseGeometry:
 
 def _reprojection_ok(X_w: np.ndarray, kf: KeyFrame, kp: np.ndarray, g: FuseGeometry) -> np.ndarray:
     """(M,) bool: world points X_w (M,3) reproject onto keypoints `kp` of `kf` within the chi-square bound;
-    keypoints with depth are also checked in the virtual right image (depth agreement)."""
-    T = inv(kf.T_WC)
-    Pc = X_w @ T[:3, :3].T + T[:3, 3]
-    z = np.maximum(Pc[:, 2], 1e-9)
-    u = g.K[0, 0] * Pc[:, 0] / z + g.K[0, 2]
-    v = g.K[1, 1] * Pc[:, 1] / z + g.K[1, 2]
-    f = kf.feats
-    e2 = (u - f.uv[kp, 0]) ** 2 + (v - f.uv[kp, 1]) ** 2
-    d = f.depth[kp]
-    has = d > 0
-    ur_kp = f.uv[kp, 0] - g.bf / np.where(has, d, 1.0)
-    e2 = np.where(has, e2 + (u - g.bf / z - ur_kp) ** 2, e2)
-    return (Pc[:, 2] > 0) & (e2 * g.inv_sigma2[f.octave[kp]] < np.where(has, CHI2_STEREO, CHI2_MONO))
+    keypoints with depth are also checked in the virtual right image (depth agreement), as in motion-only BA."""
+    Pc = transform(inv(kf.T_WC), X_w)
+    front = Pc[:, 2] > 0
+    Pc[~front, 2] = 1.0  # behind the camera: rejected below, kept finite here
+    obs, has = rp.observations(kf.feats.uv[kp], kf.feats.depth[kp], g.bf)
+    e2 = ((rp.project(Pc, g.K, g.bf) - obs) ** 2 * rp.residual_weights(has)).sum(1)
+    return front & (e2 * g.inv_sigma2[kf.feats.octave[kp]] < np.where(has, CHI2_STEREO, CHI2_MONO))
 
 
 def fuse_into(slam_map: Map, kf: KeyFrame, ids: np.ndarray, g: FuseGeometry, radius_px: float,
@@ -100,23 +95,20 @@ def apply_merges(slam_map: Map, remap: np.ndarray) -> int:
     for i in dropped:  # resolve chains a -> b -> c
         remap[i] = _root(remap, int(i))
     p = slam_map.points
-    kept = np.unique(remap[dropped])
+    counts = np.zeros(len(remap), np.int32)
     for kf in slam_map.keyframes:
         pid = kf.point_ids
-        has = pid >= 0
-        pid[has] = remap[pid[has]]
-        sel = np.flatnonzero(has)
-        _, first = np.unique(pid[sel], return_index=True)
+        sel = np.flatnonzero(pid >= 0)
+        pid[sel] = remap[pid[sel]]
+        ids, first = np.unique(pid[sel], return_index=True)
         repeat = np.ones(len(sel), bool)
         repeat[first] = False
         pid[sel[repeat]] = -1
+        counts[ids] += 1
     np.add.at(p.visible, remap[dropped], p.visible[dropped])
     np.add.at(p.found, remap[dropped], p.found[dropped])
     p.kill(dropped)
-    counts = np.zeros(len(remap), np.int32)
-    for kf in slam_map.keyframes:
-        pid = kf.point_ids[kf.point_ids >= 0]
-        counts[pid] += 1
+    kept = np.unique(remap[dropped])
     p.n_obs[kept] = counts[kept]
     return len(dropped)
 

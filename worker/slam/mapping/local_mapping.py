@@ -42,8 +42,8 @@ class LocalMapper:
         self.culled = 0
         self.triangulated = 0
         self.fused = 0
-        # the pyramid's scale factor, from the per-octave 1/sigma^2 it was built with
-        self.scale_factor = float(np.sqrt(inv_sigma2[0] / inv_sigma2[1])) if len(inv_sigma2) > 1 else 1.2
+        # the pyramid's scale factor, from the per-octave 1/sigma^2 it was built with (one level: no pyramid)
+        self.scale_factor = float(np.sqrt(inv_sigma2[0] / inv_sigma2[1])) if len(inv_sigma2) > 1 else 1.0
         self.geometry = FuseGeometry(K, size, 1.0 / np.sqrt(inv_sigma2), inv_sigma2, bf)
         self.last_ba: BAStats | None = None
 
