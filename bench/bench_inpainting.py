@@ -9,7 +9,7 @@ masks, so the figures isolate the restoration from tracking and segmentation err
 holes, hole size and time/frame.
 
     .venv/bin/python bench/bench_inpainting.py SEQ_DIR [SEQ_DIR ...] [--frames 30] [--camera tum3] [--speed]
-        [--references causal,both-sided] [--far-refs 2[,0]] [--align-px 0[,6]]
+        [--references causal,both-sided] [--far-refs 2[,0]] [--align-px 0[,6]] [--refine 0[,1,0.25]]
         [--unseen-fill harmonic,telea,patchmatch] [--unseen-depth border|none]
         [--static REAL_SEQ:CAMERA [--static-every 100] [--static-max-frames N]]
 
@@ -32,6 +32,7 @@ sys.path.insert(0, str(ROOT))  # this checkout's code, not the installed one's (
 
 from worker.slam.camera import parse_camera  # noqa: E402
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references  # noqa: E402
+from worker.slam.inpainting.refine import PoseRefinementConfig  # noqa: E402
 from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, restore_frame  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.truth import load_truth, restoration_psnr  # noqa: E402
@@ -59,7 +60,7 @@ def bench_sequence(root: Path, camera: str, n_frames: int, both_sided: bool, con
     picks = candidates[:: max(1, len(candidates) // n_frames)][:n_frames]
     rows: dict[str, list[float]] = {"pm_psnr": [], "telea_psnr": [], "pm_depth_med": [], "depth_valid": [],
                                     "hole": [], "ms": [],
-            "refs": [], "seen": [], "seen_psnr": [], "unseen_psnr": []}
+            "refs": [], "refined": [], "seen": [], "seen_psnr": [], "unseen_psnr": []}
     depth_errors: list[np.ndarray] = []
     window = range(-sel_cfg.reach, sel_cfg.reach + 1 if both_sided else 0)
     for i in picks:
@@ -82,6 +83,7 @@ def bench_sequence(root: Path, camera: str, n_frames: int, both_sided: bool, con
         depth_errors.append(np.abs(out.depth[ok] - bg_depth[ok]))
         rows["hole"].append(hole.mean())
         rows["refs"].append(len(refs))
+        rows["refined"].append(out.poses_refined)
         seen = out.seen_by_reference
         rows["seen"].append(seen.sum() / max(hole.sum(), 1))
         rows["seen_psnr"].append(restoration_psnr(out.rgb, bg_rgb, seen) if seen.any() else np.nan)
@@ -164,6 +166,13 @@ def bench_static(spec: str, fills: list[str], every: int, max_frames: int | None
         print(f"| | {100 * frac:.0f} | " + " | ".join(cells) + " |", flush=True)
 
 
+def _refinement(value: str) -> PoseRefinementConfig:
+    """`--refine` value: "0" off, "1" the default, another number the scale the alignment runs at."""
+    if value in ("0", "1"):
+        return PoseRefinementConfig(enabled=value == "1")
+    return PoseRefinementConfig(enabled=True, scale=float(value))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("sequences", nargs="*", type=Path)
@@ -187,6 +196,10 @@ def main() -> None:
                     help="restoration.restoration.align_px values to compare, comma-separated (0: off)")
     ap.add_argument("--blend-refs", default=str(RestorationConfig().blend_refs),
                     help="restoration.restoration.blend_refs values to compare, comma-separated (1: first only)")
+    ap.add_argument("--refine", default="1" if RestorationConfig().refine.enabled else "0",
+                    help="reference pose refinement to compare, comma-separated: 0 (the references' poses as "
+                         "given), 1 (photometrically refined first, restoration.restoration.refine), or the scale "
+                         "the refinement runs at (e.g. 0.25)")
     ap.add_argument("--unseen-depth", default="border", help="depth of pixels no reference sees: border|none")
     args = ap.parse_args()
     if not args.sequences and not args.static:
@@ -201,23 +214,26 @@ def main() -> None:
           "depth restored % | ms/frame |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     windows = args.references.split(",")
-    for root, window, fill, far, align, blend in itertools.product(
+    for root, window, fill, far, align, blend, refine in itertools.product(
             args.sequences, windows, fills, args.far_refs.split(","), args.align_px.split(","),
-            args.blend_refs.split(",")):
+            args.blend_refs.split(","), args.refine.split(",")):
         config = RestorationConfig(unseen_fill=fill, unseen_depth=args.unseen_depth, align_px=int(align),
-                                   blend_refs=int(blend))
+                                   blend_refs=int(blend), refine=_refinement(refine))
         sel_cfg = ReferenceSelectionConfig(far_refs=int(far))
         r = bench_sequence(root, args.camera, args.frames, window == "both-sided", config, sel_cfg)
-        print(f"| {root.name} | {window}, far refs: {far}, align: {align}, blend: {blend}, unseen: {fill}, "
+        print(f"| {root.name} | {window}, far refs: {far}, align: {align}, blend: {blend}, refine: {refine}, "
+              f"unseen: {fill}, "
               f"depth: {args.unseen_depth} | {r['frames']} | {100 * r['hole']:.1f} | "
-              f"{r['refs']:.1f} | {100 * r['seen']:.0f} | {r['pm_psnr']:.2f} | {r['seen_psnr']:.2f} | "
+              f"{r['refs']:.1f} ({r['refined']:.1f} refined) | {100 * r['seen']:.0f} | {r['pm_psnr']:.2f} | "
+              f"{r['seen_psnr']:.2f} | "
               f"{r['unseen_psnr']:.2f} | {r['telea_psnr']:.2f} | {100 * r['pm_depth_med']:.2f} | "
               f"{100 * r['depth_p90']:.2f} | {100 * r['depth_bad']:.1f} | {100 * r['depth_valid']:.0f} | "
               f"{r['ms']:.0f} |", flush=True)
     if args.speed:
         for root in args.sequences:
-            for fill in fills:
-                bench_speed(root, args.camera, RestorationConfig(unseen_fill=fill, unseen_depth=args.unseen_depth))
+            for fill, refine in itertools.product(fills, args.refine.split(",")):
+                bench_speed(root, args.camera, RestorationConfig(unseen_fill=fill, unseen_depth=args.unseen_depth,
+                                                                 refine=_refinement(refine)))
 
 
 if __name__ == "__main__":

@@ -122,3 +122,15 @@ def test_deferred_restoration_takes_the_next_frames_as_tracked(people_seq, tmp_p
     assert m1["restored_for"] == m0["restored_for"] and m1["restored_for"].get("keyframe", 0) > 0
     assert m1["future_references"] > 0
     assert m1["truth"]["restoration_psnr"] >= m0["truth"]["restoration_psnr"] - 0.1
+
+
+def test_reference_pose_refinement_is_counted_and_off_by_default(people_seq):
+    """Off (the default), no reference pose is touched; on, the job's metrics say how many of the references it
+    corrected (the synthetic poses are exact, so the ring check may keep every one as given)."""
+    off = run_pipeline(Sequence(people_seq, PRESETS["tum3"]), get_preset("full"), None, max_frames=30)
+    on = run_pipeline(Sequence(people_seq, PRESETS["tum3"]),
+                      get_preset("full", {"restoration.restoration.refine.enabled": True}), None, max_frames=30)
+    m0, m1 = off.metrics["restoration"], on.metrics["restoration"]
+    assert m0["reference_poses_refined"] == 0 and m0["references_used"] > 0
+    assert m1["references_used"] == m0["references_used"]
+    assert 0 <= m1["reference_poses_refined"] <= m1["references_used"]

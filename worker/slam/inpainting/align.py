@@ -58,15 +58,9 @@ def ring_shift(ring: Ring, ref_grey: np.ndarray, ref_valid: np.ndarray, T_rt: np
     projects to (with its depth, T_rt: target camera -> reference camera) so that the reference best matches
     the target on `ring`. `ref_grey` (H, W) uint8 or float; `ref_valid` (H, W) bool marks the reference pixels that
     may be used (static). (0, 0) when the ring gives too little to go on."""
-    h, w = ref_grey.shape
-    u, v, z_ref = project_into_reference(np.stack([ring.ys, ring.xs], 1), ring.depth, T_rt, K)
-    x0, y0 = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
-    ok = (z_ref > 1e-3) & (x0 - radius >= 0) & (y0 - radius >= 0) & (x0 + 1 + radius < w) & \
-        (y0 + 1 + radius < h)
-    ok[ok] &= ref_valid[y0[ok], x0[ok]]
-    if ok.sum() < MIN_RING_PIXELS:
+    args = _ring_samples(ring, ref_grey, ref_valid, T_rt, K, radius)
+    if args is None:
         return 0, 0
-    args = (ref_grey, ref_valid, y0[ok], x0[ok], v[ok] - y0[ok], u[ok] - x0[ok], ring.grey[ok])
     # every second shift first, then the best one's neighbours: a third of the full search's cost, and the
     # same choice on the augmented frames (README, "Background restoration")
     coarse = np.arange(-radius, radius + 1, 2)
@@ -77,6 +71,33 @@ def ring_shift(ring: Ring, ref_grey: np.ndarray, ref_valid: np.ndarray, T_rt: np
     near = near[(np.abs(near) <= radius).all(1)]
     dy, dx = near[int(np.argmax(_zncc_per_shift(*args, near)))]
     return int(dy), int(dx)
+
+
+def ring_zncc(ring: Ring, ref_grey: np.ndarray, ref_valid: np.ndarray, T_rt: np.ndarray, K: np.ndarray) -> float:
+    """Zero-normalised cross-correlation of the target's `ring` with the reference (`ref_grey` (H, W),
+    `ref_valid` (H, W) bool) sampled where the ring's pixels project at pose T_rt (target camera -> reference
+    camera); -2 when too little of the ring is seen to say."""
+    args = _ring_samples(ring, ref_grey, ref_valid, T_rt, K, 0)
+    return -2.0 if args is None else float(_zncc_per_shift(*args, np.zeros((1, 2), np.int64))[0])
+
+
+_Samples = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""grey, valid, y0, x0, fy, fx, t: `_zncc_per_shift`'s arguments before the shifts."""
+
+
+def _ring_samples(ring: Ring, ref_grey: np.ndarray, ref_valid: np.ndarray, T_rt: np.ndarray, K: np.ndarray,
+                  radius: int) -> _Samples | None:
+    """The arguments of `_zncc_per_shift` for the ring pixels whose projections stay `radius` pixels inside
+    the reference on a valid pixel; None when fewer than `MIN_RING_PIXELS` do."""
+    h, w = ref_grey.shape
+    u, v, z_ref = project_into_reference(np.stack([ring.ys, ring.xs], 1), ring.depth, T_rt, K)
+    x0, y0 = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
+    ok = (z_ref > 1e-3) & (x0 - radius >= 0) & (y0 - radius >= 0) & (x0 + 1 + radius < w) & \
+        (y0 + 1 + radius < h)
+    ok[ok] &= ref_valid[y0[ok], x0[ok]]
+    if ok.sum() < MIN_RING_PIXELS:
+        return None
+    return ref_grey, ref_valid, y0[ok], x0[ok], v[ok] - y0[ok], u[ok] - x0[ok], ring.grey[ok]
 
 
 @njit(cache=True, nogil=True)

@@ -18,6 +18,7 @@ from worker.slam.config import valid
 from worker.slam.inpainting.align import hole_ring, ring_shift
 from worker.slam.inpainting.border_fill import fill_depth_from_border, harmonic_fill
 from worker.slam.inpainting.patchmatch import PatchMatchConfig, patchmatch_fill
+from worker.slam.inpainting.refine import PoseRefinementConfig, PoseRefiner
 from worker.slam.inpainting.warp import depth_in_target, forward_warp, relative_pose, sample_reference
 
 UNSEEN_FILLS = ("telea", "harmonic", "patchmatch")
@@ -28,6 +29,9 @@ class RestorationConfig:
     """Background restoration of one frame."""
 
     patchmatch: PatchMatchConfig = field(default_factory=PatchMatchConfig)
+    refine: PoseRefinementConfig = field(default_factory=PoseRefinementConfig)
+    """Each reference's relative pose is first corrected by photometric alignment with the target's static
+    pixels (`refine.py`)."""
     use_target_as_source: bool = True
     """Let PatchMatch copy from the target's own static region where no reference sees the background."""
     unseen_fill: str = "harmonic"
@@ -113,6 +117,8 @@ class Restoration:
     """bool (H, W): hole pixels some reference sees through geometry."""
     from_geometry: float
     from_self: float
+    poses_refined: int = 0
+    """References whose relative pose the photometric refinement corrected (`refine.py`)."""
 
 
 def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np.ndarray,
@@ -128,9 +134,17 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
     init_src = np.full(len(py), -1, np.int64)
     init_yx = np.full((len(py), 2), -1, np.int64)
     ry, rx = py - region[0], px - region[2]
+    refiner = None
+    if config.refine.enabled and refs:
+        refiner = PoseRefiner(rgb, depth, ~hole, K, hole_ring(rgb, depth, hole, region, config.refine.check_ring_px),
+                              config.refine)
+    refined = 0
     for s, ref in enumerate(refs):
         rel.append(relative_pose(ref.T_WC, T_WC))
         valid.append(~ref.dynamic)
+        if refiner is not None:
+            rel[-1], better = refiner.refine(ref.rgb, ref.depth, valid[-1], rel[-1])
+            refined += better
         landed_region = forward_warp(ref.depth, valid[-1], rel[-1], K, region)
         gains.append(_colour_gain(rgb, hole, ref.rgb, landed_region, region) if config.colour_gain
                      else np.ones(3))
@@ -229,7 +243,8 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
     from_self = float(np.sum(src_all == self_index)) / n
     seen = np.zeros_like(hole)
     seen[py[geo], px[geo]] = True
-    return Restoration(out_rgb, out_depth, confidence, hole, seen, 1.0 - from_self if refs else 0.0, from_self)
+    return Restoration(out_rgb, out_depth, confidence, hole, seen, 1.0 - from_self if refs else 0.0, from_self,
+                       refined)
 
 
 @njit(cache=True, nogil=True)

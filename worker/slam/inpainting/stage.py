@@ -130,6 +130,8 @@ class RestorationStage:
         self.deferred = 0
         self.extra = 0
         self.relaxed = 0
+        self.references_used = 0
+        self.poses_refined = 0  # references whose pose the photometric alignment corrected
         # restorations may run on the pipeline's background thread: they share `ahead`, the counters and an
         # extractor of their own (not the tracker's)
         self._lock = threading.Lock()
@@ -233,6 +235,8 @@ class RestorationStage:
         inputs.deferred = None
         self.restored_frames += 1
         self.restored_for[why] += 1
+        self.poses_refined += out.poses_refined
+        self.references_used += len(refs)
         inputs.info.update(references=len(refs),
                            hole_seen_fraction=float(out.seen_by_reference.sum() / max(hole.sum(), 1)))
         if self.cfg.restored_features:
@@ -294,6 +298,7 @@ class RestorationStage:
                      "not_restored": self.deferred - self.restored_for["keyframe"] - self.restored_for["preview"],
                      "future_references": self.future_refs, "far_references": self.far_refs,
                      "restored_features": self.extra,
+                     "references_used": self.references_used, "reference_poses_refined": self.poses_refined,
                      "relaxed_reference_choices": self.relaxed}
         if self.psnr:
             # over the restored frames only: on demand, those are the keyframes and previews (`restored_for`)
