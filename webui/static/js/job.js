@@ -79,6 +79,7 @@
       ["Poses matched to ground truth", m.matched_poses, 0, ""], ["Speed, whole pipeline", m.fps, 2, "frames/s"],
       ["Speed, tracking only", m.tracking_fps, 2, "frames/s"], ["Map points", m.map_points, 0, ""],
       ["Observations added by map-point fusion", m.fused_observations, 0, ""],
+      ["Reference poses refined for restoration", dig(m, "restoration", "reference_poses_refined"), 0, ""],
       ["Dense map points", m.dense_points, 0, ""], ["Peak memory", m.peak_rss_mb, 1, "MB"],
     ].filter((r) => isNum(r[1]));
     // Counts and speeds in a two-column table of their own: on a phone it fits, while the wide error table scrolls.
