@@ -126,7 +126,8 @@ def test_deferred_restoration_takes_the_next_frames_as_tracked(people_seq, tmp_p
 
 def test_reference_pose_refinement_is_counted_and_off_by_default(people_seq):
     """Off (the default), no reference pose is touched; on, the job's metrics say how many of the references it
-    corrected (the synthetic poses are exact, so the ring check may keep every one as given)."""
+    corrected (the tracker's poses agree with the synthetic images, so the ring check may keep every one as
+    given)."""
     off = run_pipeline(Sequence(people_seq, PRESETS["tum3"]), get_preset("full"), None, max_frames=30)
     on = run_pipeline(Sequence(people_seq, PRESETS["tum3"]),
                       get_preset("full", {"restoration.restoration.refine.enabled": True}), None, max_frames=30)

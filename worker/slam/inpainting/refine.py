@@ -32,10 +32,10 @@ class PoseRefinementConfig:
 
     enabled: bool = False
     """Off by default: with the tracker's poses (consistent with the images they were estimated from) the
-    pipeline's restored keyframes gained 0.06 dB on the augmented sequences, and the alignment costs ~14 ms per
-    reference at half scale (a 15 % hole with three references 31 -> 66 ms, above the 50 ms budget); with
-    external poses a few pixels off (7-Scenes' ground truth) it gains 1.7 dB (README, "Background
-    restoration")."""
+    pipeline's restored keyframes gained 0.08 dB on the augmented sequences, and the alignment costs ~14 ms per
+    reference at half scale (a 15 % hole with three references 32 -> 68-71 ms on an augmented frame, above the
+    50 ms budget); with external poses a few pixels off (7-Scenes' ground truth) it gains 1.7 dB (README,
+    "Background restoration")."""
     scale: float = valid(0.5, 0.125, 1.0)
     """Image scale the alignment runs at (0.5: half resolution)."""
     min_static_fraction: float = valid(0.1, 0.0, 1.0)
