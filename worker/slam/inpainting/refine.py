@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from worker.slam.config import valid
+from worker.slam.geometry.se3 import pose_distance
 from worker.slam.inpainting.align import Ring, ring_zncc
 from worker.slam.inpainting.warp import depth_in_target, forward_warp
 
@@ -123,6 +124,7 @@ class PoseRefiner:
         return (refined, True) if after > before else (T_tr, False)
 
     def _plausible(self, delta: np.ndarray) -> bool:
-        angle = np.degrees(np.arccos(np.clip((np.trace(delta[:3, :3]) - 1) / 2, -1.0, 1.0)))
-        return bool(np.linalg.norm(delta[:3, 3]) <= self.config.max_translation_m
-                    and angle <= self.config.max_rotation_deg and np.isfinite(delta).all())
+        if not np.isfinite(delta).all():
+            return False
+        metres, radians = pose_distance(np.eye(4), delta)
+        return metres <= self.config.max_translation_m and np.degrees(radians) <= self.config.max_rotation_deg
