@@ -165,6 +165,10 @@ class MappingConfig:
     """Bundle-adjust all keyframes and points once at the end (the first keyframe fixed)."""
     global_ba_iterations: int = valid(10, 0, 1_000)
     """Levenberg-Marquardt iterations of the final global BA."""
+    refit_frames: bool = True
+    """At the end, re-solve every tracked non-keyframe frame's pose by motion-only BA against the final
+    positions of the map points it matched (`mapping/frame_refit.py`): its stored pose keeps the error of the
+    points as they were when it was tracked. Keeps ~7 kB per frame until the end."""
 
 
 @dataclass

@@ -1,7 +1,8 @@
 """Run a sequence through the pipeline: per-frame stages -> tracking -> local mapping -> loop closure -> dense map.
 
-Frames are streamed (read one at a time); the only per-frame state kept is the pose relative to its
-reference keyframe, so BA and loop corrections move every frame's pose at the end.
+Frames are streamed (read one at a time); the per-frame state kept is the pose relative to its reference
+keyframe, so BA and loop corrections move every frame's pose at the end, and (`mapping.refit_frames`) the map
+points it matched, so each frame's pose is then re-solved against the final map (`mapping/frame_refit.py`).
 
 Per-frame stages (segmentation, dynamic culling, restoration) follow the contract of `worker.slam.stages`; a
 config lists the stages it runs in `config.stages`. Before each frame the pipeline gives them a fresh
@@ -48,6 +49,7 @@ from worker.slam.io.work_behind import WorkBehind
 from worker.slam.map.map import Map
 from worker.slam.mapping.carve import FrameViews
 from worker.slam.mapping.dense_map import build_dense_map
+from worker.slam.mapping.frame_refit import FrameMatchLog, refit_poses
 from worker.slam.mapping.local_mapping import LocalMapper
 from worker.slam.mapping.loop_closure import LoopCloser
 from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPose, build_stages
@@ -129,6 +131,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     previews = _PreviewPicker(start, total)
     timer = _Timer()
     rel: list[tuple[int, np.ndarray]] = []  # per frame: (reference keyframe, T_ref_frame)
+    matches = FrameMatchLog() if config.mapping.refit_frames else None
     stamps, tracked = np.zeros(total), np.zeros(total, bool)
     n_reloc = n_new_maps = n_merges = 0
     frame_info: list[dict] = []
@@ -197,6 +200,9 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
             n_new_maps += int(res.new_map)
             n_merges += int(res.merged)
             rel.append(_relative(smap, res))
+            if matches is not None:
+                matches.add(res.point_ids, res.feats.uv, res.feats.depth, res.feats.octave,
+                            res.ok and res.keyframe is None)
             if progress is not None:
                 progress(k + 1, total, "tracking")
         while waiting:  # the last frames' deferred work: the frames it waited for do not exist
@@ -212,6 +218,13 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
         progress(total, total, "dense")
     t = time.perf_counter()
     poses = np.stack([smap.keyframes[r].T_WC @ T_rf if len(smap) else T_rf for r, T_rf in rel])
+    n_refit = 0
+    if matches is not None and len(smap):
+        t = time.perf_counter()
+        tc = config.tracking
+        n_refit = refit_poses(poses, matches, smap.points, camera.K, tracker.bf, tracker.extractor.inv_sigma2,
+                              tc.huber_px, tc.ba_rounds, tc.ba_iterations, tc.min_matches)
+        timer("frame_refit", t)
     traj = Trajectory(stamps, orthonormalize(poses))
     kf_traj = Trajectory(np.array([kf.timestamp for kf in smap.keyframes]), smap.poses())
     cloud = None
@@ -225,6 +238,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
         "relocalisations": n_reloc, "new_maps": n_new_maps, "map_merges": n_merges,
         "established_switches": tracker.established_switches,
         "rescued_frames": tracker.rescued_frames, "last_pose_retries": tracker.last_pose_retries,
+        "frames_refit": n_refit,
         "keyframes": len(smap), "map_points": smap.points.n_alive, "fused_observations": mapper.fused,
         "loops": closer.n_loops if closer else 0, "loops_applied": closer.n_applied if closer else 0,
         "fps": round(total / loop_s, 2) if loop_s > 0 else None,

@@ -1,0 +1,67 @@
+"""Every frame's pose re-solved against the final map, once the run's last bundle adjustment is done.
+
+A frame is tracked against the map as it was at that moment; afterwards local and global BA move the points it
+matched. Its stored pose (reference keyframe x relative pose) follows the keyframe but keeps the old points'
+error. When the whole sequence is processed (a job, not a live stream), each tracked non-keyframe frame is
+solved once more by the tracker's motion-only BA against the final positions of the points it matched,
+starting from its stored pose. Keyframes keep their bundle-adjusted poses.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from worker.slam.geometry.pose_optimizer import optimize_pose
+from worker.slam.map.map_points import MapPoints
+
+
+@dataclass
+class FrameMatches:
+    """What one tracked frame matched: map point `ids` (M,) int32, undistorted pixels `uv` (M,2) float32,
+    keypoint depth `depth` (M,) float32 metres (0 = none), pyramid `octave` (M,) int8."""
+
+    ids: np.ndarray
+    uv: np.ndarray
+    depth: np.ndarray
+    octave: np.ndarray
+
+
+@dataclass
+class FrameMatchLog:
+    """Per frame of a run, its matches (None: lost, or a keyframe, whose pose BA owns). ~7 kB per frame."""
+
+    frames: list[FrameMatches | None] = field(default_factory=list)
+
+    def add(self, point_ids: np.ndarray, uv: np.ndarray, depth: np.ndarray, octave: np.ndarray,
+            keep: bool) -> None:
+        """`point_ids` (N,) int64 per keypoint (-1 = unmatched) with the keypoints' `uv` (N,2), `depth` (N,),
+        `octave` (N,); `keep` False records the frame as not refittable."""
+        if not keep:
+            self.frames.append(None)
+            return
+        m = point_ids >= 0
+        self.frames.append(FrameMatches(point_ids[m].astype(np.int32), uv[m].astype(np.float32),
+                                        depth[m].astype(np.float32), octave[m].astype(np.int8)))
+
+
+def refit_poses(poses: np.ndarray, log: FrameMatchLog, points: MapPoints, K: np.ndarray, bf: float,
+                inv_sigma2: np.ndarray, huber_px: float, rounds: int, iterations: int, min_matches: int) -> int:
+    """Re-solve in place each logged frame of `poses` (F,4,4) T_WC, world frame of the map, from its matches to
+    the still-alive `points`; a frame keeps its pose when fewer than `min_matches` alive points (or inliers of
+    the new solve) remain. Returns the number of frames re-solved."""
+    n = 0
+    for k, m in enumerate(log.frames):
+        if m is None:
+            continue
+        alive = points.alive[m.ids]
+        if alive.sum() < min_matches:
+            continue
+        ids = m.ids[alive]
+        est = optimize_pose(poses[k], points.pos[ids], m.uv[alive].astype(np.float64),
+                            m.depth[alive].astype(np.float64), inv_sigma2[m.octave[alive]], K, bf, huber_px,
+                            rounds, iterations)
+        if est.n_inliers >= min_matches:
+            poses[k] = est.T_WC
+            n += 1
+    return n
