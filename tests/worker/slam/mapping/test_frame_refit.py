@@ -43,7 +43,7 @@ def test_a_frame_follows_the_points_that_bundle_adjustment_moved():
     assert n == 1
     dt_before, _ = pose_distance(stored, T_true)
     dt_after, dr_after = pose_distance(poses[0], T_true)
-    assert dt_before > 0.02 and dt_after < 0.002 and dr_after < 0.1
+    assert dt_before > 0.02 and dt_after < 0.002 and dr_after < 0.002  # radians
 
 
 def test_frames_without_enough_surviving_points_and_unlogged_frames_keep_their_poses():
