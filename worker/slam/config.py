@@ -168,7 +168,7 @@ class MappingConfig:
     refit_frames: bool = True
     """At the end, re-solve every tracked non-keyframe frame's pose by motion-only BA against the final
     positions of the map points it matched (`mapping/frame_refit.py`): its stored pose keeps the error of the
-    points as they were when it was tracked. Keeps ~7 kB per frame until the end."""
+    points as they were when it was tracked. Keeps ~6 kB per frame until the end."""
 
 
 @dataclass

@@ -221,9 +221,8 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     n_refit = 0
     if matches is not None and len(smap):
         t = time.perf_counter()
-        tc = config.tracking
         n_refit = refit_poses(poses, matches, smap.points, camera.K, tracker.bf, tracker.extractor.inv_sigma2,
-                              tc.huber_px, tc.ba_rounds, tc.ba_iterations, tc.min_matches)
+                              config.tracking)
         timer("frame_refit", t)
     traj = Trajectory(stamps, orthonormalize(poses))
     kf_traj = Trajectory(np.array([kf.timestamp for kf in smap.keyframes]), smap.poses())

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from worker.slam.config import TrackingConfig
 from worker.slam.geometry.pose_optimizer import optimize_pose
 from worker.slam.map.map_points import MapPoints
 
@@ -30,7 +31,8 @@ class FrameMatches:
 
 @dataclass
 class FrameMatchLog:
-    """Per frame of a run, its matches (None: lost, or a keyframe, whose pose BA owns). ~7 kB per frame."""
+    """Per frame of a run, its matches (None: lost, or a keyframe, whose pose BA owns); ~6 kB per frame
+    (7-Scenes, 300 frames: mean 5.8 kB, at most 14.5)."""
 
     frames: list[FrameMatches | None] = field(default_factory=list)
 
@@ -47,22 +49,22 @@ class FrameMatchLog:
 
 
 def refit_poses(poses: np.ndarray, log: FrameMatchLog, points: MapPoints, K: np.ndarray, bf: float,
-                inv_sigma2: np.ndarray, huber_px: float, rounds: int, iterations: int, min_matches: int) -> int:
+                inv_sigma2: np.ndarray, tc: TrackingConfig) -> int:
     """Re-solve in place each logged frame of `poses` (F,4,4) T_WC, world frame of the map, from its matches to
-    the still-alive `points`; a frame keeps its pose when fewer than `min_matches` alive points (or inliers of
-    the new solve) remain. Returns the number of frames re-solved."""
+    the still-alive `points`, with the tracker's motion-only BA settings `tc`; a frame keeps its pose when fewer
+    than `tc.min_matches` alive points (or inliers of the new solve) remain. Returns the number re-solved."""
     n = 0
     for k, m in enumerate(log.frames):
         if m is None:
             continue
         alive = points.alive[m.ids]
-        if alive.sum() < min_matches:
+        if alive.sum() < tc.min_matches:
             continue
         ids = m.ids[alive]
         est = optimize_pose(poses[k], points.pos[ids], m.uv[alive].astype(np.float64),
-                            m.depth[alive].astype(np.float64), inv_sigma2[m.octave[alive]], K, bf, huber_px,
-                            rounds, iterations)
-        if est.n_inliers >= min_matches:
+                            m.depth[alive].astype(np.float64), inv_sigma2[m.octave[alive]], K, bf, tc.huber_px,
+                            tc.ba_rounds, tc.ba_iterations)
+        if est.n_inliers >= tc.min_matches:
             poses[k] = est.T_WC
             n += 1
     return n
