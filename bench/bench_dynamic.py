@@ -88,7 +88,8 @@ def _guided_cell(cull: dict) -> str:
     if "frames_compared" not in cull:
         return "–"
     notes = [f" ({cull[key]} {what})" for key, what in (("frames_not_judged", "not judged"),
-                                                        ("frames_without_objects", "without objects"))
+                                                        ("frames_without_objects", "without objects"),
+                                                        ("frames_marks_trusted", "marks trusted"))
              if cull.get(key)]
     return f"{cull['guided_matching_frames']}/{cull['frames_compared']}" + "".join(notes)
 

@@ -66,12 +66,16 @@ def test_no_restoration_and_geometry_only_run(dyn_seq, tmp_path):
     assert m2["tracked"] == 45 and "culling" in m2 and "segmentation" not in m2["timings_ms"]
 
 
-def test_static_object_of_dynamic_class_is_kept(dyn_seq, tmp_path):
+@pytest.mark.parametrize("judge_above", [0.0, 0.5])
+def test_static_object_of_dynamic_class_is_kept_where_geometry_judges_it(dyn_seq, tmp_path, judge_above):
     """With `undecided_dynamic` off and a still 'person' (the truth mask of frame 0 on every frame, over static
-    background), culling judges it static and keeps its features."""
+    background), culling that judges every mark (`judge_marks_above` 0) finds it static and keeps its features;
+    by default (0.5) a mark on less than half the view is excluded unjudged, in every frame culling compares."""
     seq = Sequence(dyn_seq)
-    cfg = get_preset("no-restoration", {"culling.culling.undecided_dynamic": False})
+    cfg = get_preset("no-restoration", {"culling.culling.undecided_dynamic": False,
+                                        "culling.culling.judge_marks_above": judge_above})
     still = load_truth(dyn_seq).mask(0)
+    assert 0.0 < still.mean() < 0.5
 
     class StillMask:
         name = "segmentation"
@@ -83,7 +87,11 @@ def test_static_object_of_dynamic_class_is_kept(dyn_seq, tmp_path):
     res = run_pipeline(seq, cfg, None, stages=[StillMask(), CullingStage(cfg, seq.camera)], max_frames=15)
     removed = res.metrics["stage_info"]["features_removed"]
     kept = res.metrics["stage_info"]["features_kept"]
-    assert removed < 0.05 * kept
+    trusted = res.metrics["culling"]["frames_marks_trusted"]
+    if judge_above == 0.0:
+        assert removed < 0.05 * kept and trusted == 0
+    else:
+        assert removed > 0.05 * kept and trusted == res.metrics["culling"]["frames_compared"] == 14
 
 
 def test_culling_gives_band_keypoints_back_rather_than_starve_the_tracker():

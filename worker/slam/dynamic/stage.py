@@ -131,7 +131,7 @@ class CullingStage:
         self.history: deque[_PastFrame] = deque(maxlen=max(1, self.cfg.lag_frames))
         self.scores: TruthScores | None = None
         self.removed_total = self.kept_total = self.readmitted_total = self.refilled = 0
-        self.compared = self.guided = self.not_judged = self.without_objects = 0
+        self.compared = self.guided = self.not_judged = self.without_objects = self.marks_trusted = 0
         # semantic segments judged, and how many of them against their own (object-level) Δd
         self.segments_judged = self.object_thresholds = 0
         # Wall time of cull_frame alone (the stage also extracts the frame's ORB, which tracking needs anyway).
@@ -181,6 +181,7 @@ class CullingStage:
             self.guided += res.guided
             self.not_judged += not res.judged
             self.without_objects += res.without_objects
+            self.marks_trusted += res.marks_trusted
             self.segments_judged += res.judged * sum(s.kind == "semantic" for s in res.segments)
             self.object_thresholds += sum(s.object_level for s in res.segments)
             self.last = res
@@ -232,6 +233,7 @@ class CullingStage:
                "features_readmitted": self.readmitted_total, "frames_refilled": self.refilled,
                "frames_compared": self.compared, "guided_matching_frames": self.guided,
                "frames_not_judged": self.not_judged, "frames_without_objects": self.without_objects,
+               "frames_marks_trusted": self.marks_trusted,
                "segments_judged": self.segments_judged, "object_level_thresholds": self.object_thresholds,
                "decision_ms_median": float(np.median(self.decision_ms)) if self.decision_ms else None}
         if self.scores is not None:

@@ -538,3 +538,30 @@ def test_usac_culls_the_moving_object_and_leaves_a_static_scene_alone():
         assert p >= 0.8 and r >= 0.8
     res, kp, _ = run(0.0, mask=False, use_segmentation=False, usac=True)
     assert res.removed(kp).mean() < 0.02
+
+
+def test_marks_on_less_of_the_view_than_the_option_says_are_excluded_unjudged():
+    """`judge_marks_above` 0.5: a still board marked as a dynamic class is excluded without a motion test (and
+    nothing is matched) while the marks cover less than half the view; where they cover most of it (a wrong
+    mark over the static wall too) geometry judges every segment and the still ones keep their features. The
+    default (0) judges every mark, as the paper does; 1.0 never judges."""
+    (rgb0, d0, _), (rgb1, d1, m1) = two_frames(0.0)
+    kp0, ds0 = orb(rgb0)
+    kp1, ds1 = orb(rgb1)
+    assert 0.02 < m1.mean() < 0.5
+    half = CullingConfig(judge_marks_above=0.5)
+    trusted = cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, half, d0, K)
+    assert trusted.marks_trusted and trusted.matches == 0
+    assert trusted.segments and all(s.dynamic for s in trusted.segments)
+    assert np.array_equal(trusted.dynamic_mask, split_segments(m1, d1, half.min_segment_area, half.depth_jump, 2) > 0)
+    assert precision_recall(trusted.removed(kp1), kp1, m1)[1] == 1.0
+    default = cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, CullingConfig(), d0, K)
+    assert not default.marks_trusted and not any(s.dynamic for s in default.segments)
+    wide = m1.copy()
+    wide[:, : int(0.6 * wide.shape[1])] = True  # the still wall under a wrong mark as well
+    assert wide.mean() > 0.5
+    res = cull_frame(kp0, ds0, kp1, ds1, d1, wide, COV, half, d0, K)
+    assert not res.marks_trusted and res.judged and res.matches > 0
+    assert not any(s.dynamic for s in res.segments) and res.removed(kp1).mean() < 0.02
+    never = cull_frame(kp0, ds0, kp1, ds1, d1, wide, COV, CullingConfig(judge_marks_above=1.0), d0, K)
+    assert never.marks_trusted and never.removed(kp1).mean() > 0.5
