@@ -182,7 +182,8 @@ class CullingStage:
             self.not_judged += not res.judged
             self.without_objects += res.without_objects
             self.marks_trusted += res.marks_trusted
-            self.segments_judged += res.judged * sum(s.kind == "semantic" for s in res.segments)
+            if res.judged and not res.marks_trusted:  # trusted marks are excluded unjudged (`judge_marks_above`)
+                self.segments_judged += sum(s.kind == "semantic" for s in res.segments)
             self.object_thresholds += sum(s.object_level for s in res.segments)
             self.last = res
             inputs.exclude_mask = res.exclude_mask
