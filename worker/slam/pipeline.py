@@ -220,10 +220,9 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     poses = np.stack([smap.keyframes[r].T_WC @ T_rf if len(smap) else T_rf for r, T_rf in rel])
     n_refit = 0
     if matches is not None and len(smap):
-        t = time.perf_counter()
         n_refit = refit_poses(poses, matches, smap.points, camera.K, tracker.bf, tracker.extractor.inv_sigma2,
                               config.tracking)
-        timer("frame_refit", t)
+        t = timer("frame_refit", t)  # "dense" below times the dense map alone
     traj = Trajectory(stamps, orthonormalize(poses))
     kf_traj = Trajectory(np.array([kf.timestamp for kf in smap.keyframes]), smap.poses())
     cloud = None
