@@ -7,6 +7,7 @@ import numpy as np
 
 from worker.slam.config import valid
 from worker.slam.features.matching import cross_checked
+from worker.slam.geometry.se3 import pose_distance
 
 
 @dataclass(frozen=True)
@@ -72,13 +73,6 @@ class Selection:
     """The second-chance references among `indices` (they come last)."""
 
 
-def relative_motion(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
-    """(translation m, rotation deg) between two camera poses T_WC."""
-    T = np.linalg.inv(T_a) @ T_b
-    cos = np.clip((np.trace(T[:3, :3]) - 1) / 2, -1.0, 1.0)
-    return float(np.linalg.norm(T[:3, 3])), float(np.degrees(np.arccos(cos)))
-
-
 def match_ratio(desc_target: np.ndarray | None, desc_cand: np.ndarray | None,
                 max_target: int | None = None) -> float:
     """Cross-checked Hamming matches / target features (the paper's information estimate), from at most
@@ -123,7 +117,8 @@ def _choose(target: Candidate, candidates: list[Candidate], config: ReferenceSel
         ratio = match_ratio(target.descriptors, c.descriptors, config.max_target_descriptors)
         if ratio < config.min_match_ratio:
             continue
-        dt, dr = relative_motion(target.T_WC, c.T_WC)
+        dt, dr_rad = pose_distance(target.T_WC, c.T_WC)
+        dr = np.degrees(dr_rad)
         moved = dt >= config.min_translation_m and dr >= config.min_rotation_deg
         scored.append((moved, ratio * (1 + dt / config.min_translation_m), c.index, ratio))
     scored.sort(key=lambda s: (s[0], s[1]), reverse=True)
