@@ -84,14 +84,12 @@ def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, override
 
 
 def _guided_cell(cull: dict) -> str:
-    """Guided frames / frames compared, with the frames not judged, without objects or with trusted marks and the
-    segments the motion memory kept dynamic, when there are any."""
+    """Guided frames / frames compared, with the frames not judged and without objects when there are any."""
     if "frames_compared" not in cull:
         return "–"
     notes = [f" ({cull[key]} {what})" for key, what in (("frames_not_judged", "not judged"),
                                                         ("frames_without_objects", "without objects"),
-                                                        ("frames_marks_trusted", "marks trusted"),
-                                                        ("segments_remembered", "segments remembered"))
+                                                        ("frames_marks_trusted", "marks trusted"))
              if cull.get(key)]
     return f"{cull['guided_matching_frames']}/{cull['frames_compared']}" + "".join(notes)
 

@@ -96,25 +96,6 @@ def test_static_object_of_dynamic_class_is_kept_where_geometry_judges_it(dyn_seq
         assert removed > 0.05 * kept and trusted == res.metrics["culling"]["frames_compared"] == 14 and judged == 0
 
 
-def test_the_motion_memory_remembers_pixels_found_moving_often_enough_in_its_last_frames():
-    """`culling.motion_memory` 3 with `motion_memory_hits` 2: a pixel is remembered while at least two of the
-    last three compared frames found it moving; frames where nothing moved count as time passing."""
-    from worker.slam.camera import parse_camera
-
-    cfg = get_preset("no-restoration", {"culling": {"motion_memory": 3, "motion_memory_hits": 2}})
-    stage = CullingStage(cfg, parse_camera("tum3"))
-    a, b = np.zeros((4, 4), bool), np.zeros((4, 4), bool)
-    a[0, 0] = b[0, 0] = b[3, 3] = True
-    assert not stage._remembered((4, 4)).any()
-    seen = []
-    for moved in (a, None, b, None, None):
-        stage._remember(moved)
-        seen.append(np.flatnonzero(stage._remembered((4, 4))).tolist())
-    assert seen == [[], [], [0], [], []]  # (0, 0) moved in frames 1 and 3, forgotten with frame 1; (3, 3) once
-    stage.cfg.motion_memory = 0
-    assert stage._remembered((4, 4)) is None
-
-
 def test_culling_gives_band_keypoints_back_rather_than_starve_the_tracker():
     from worker.slam.camera import parse_camera
 

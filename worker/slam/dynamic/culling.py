@@ -5,13 +5,11 @@ outside potentially dynamic segments; where the previous frame has depth, also i
 the relative pose from PnP (this catches motion *along* the epipolar line, which F cannot see); with the
 tracker's predicted pose, at most its reprojection error under that prediction (see `prediction_veto`). An object is
 dynamic when the median score of its points exceeds the adaptive threshold Δd = f(H); all its pixels (dilated)
-are then excluded. A still object of a dynamic class (a sitting person) keeps its features, unless the
-motion memory (`remembered`) saw its pixels move in recent frames (a walker who pauses). Without segmentation
+are then excluded. A still object of a dynamic class (a sitting person) keeps its features. Without segmentation
 (or for objects no class covers) clusters of high-score points with consistent depth become dynamic regions.
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 import cv2
@@ -135,11 +133,6 @@ class CullingConfig:
     they cover most of the view"): development mean 0.0250 -> 0.0242 m and the true-mask oracle 0.0261 -> 0.0254,
     but the synthetic rooms 0.0076 -> 0.0078, so it stays an option. 1 = never judge: frames whose marks cover
     90 % of the view then starve (40 of 60 tracked in the test of that name)."""
-    memory_share: float = valid(0.5, 0.0, 1.0)
-    """With a motion memory (`culling.motion_memory` of the stage), a segment the motion test finds still stays
-    dynamic when at least this share of its pixels was found moving often enough in the last frames (see
-    `cull_frame`'s `remembered`): a walker who pauses is still a walker, a wrong mark on the static scene
-    never moved."""
     undecided_dynamic: bool = True
     """A potentially dynamic segment with too few matched points to judge, or in a frame that cannot be judged
     (`min_pose_support`), is treated as dynamic (safe side: a person's features rarely match across frames when
@@ -201,8 +194,6 @@ class SegmentDecision:
     object_level: bool = False
     """True when Δd came from the segment's own motion estimate (`threshold.mode: object`), False when from
     the frame's (frame mode, or too few points with depth on the segment)."""
-    remembered: bool = False
-    """True when the motion test found it still but the motion memory kept it dynamic."""
 
 
 @dataclass(frozen=True)
@@ -227,9 +218,6 @@ class CullingResult:
     marks_trusted: bool = False
     """True when the marks covered no more than `judge_marks_above` of the view: every marked segment was
     excluded without a motion test, and nothing was matched or scored."""
-    moved: np.ndarray | None = None
-    """bool (H, W), only with a motion memory: the pixels of the segments the motion test itself found moving
-    (not the undecided or remembered ones), what the memory learns from."""
 
     def removed(self, keypoints_xy: np.ndarray) -> np.ndarray:
         """bool (M,): which of the current frame's keypoints (M, 2) fall in the excluded region."""
@@ -436,17 +424,14 @@ def _geometric_clusters(p_cur, moving, depth, covered, config) -> list[np.ndarra
 def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, desc_cur: np.ndarray,
                depth_cur: np.ndarray, potentially_dynamic: np.ndarray | None, pose_cov: np.ndarray | None,
                config: CullingConfig = CullingConfig(), prev_depth: np.ndarray | None = None,
-               K: np.ndarray | None = None, T_cur_prev: np.ndarray | None = None,
-               remembered: np.ndarray | None = None) -> CullingResult:
+               K: np.ndarray | None = None, T_cur_prev: np.ndarray | None = None) -> CullingResult:
     """Judge the objects of the current frame.
 
     `kp_*` (N, 2) pixel coordinates (x, y) with ORB `desc_*` (N, 32) uint8; `depth_cur` float32 m (H, W);
     `potentially_dynamic` bool (H, W) from segmentation (None in geometry-only mode); `pose_cov` the 6x6
     covariance of the previous pose estimate (for Δd); `prev_depth` + `K` enable the reprojection test;
     `T_cur_prev` (4x4, X_cur = T X_prev), the predicted relative pose, enables guided matching. With
-    segmentation that leaves no segment, nothing is matched (`CullingResult.without_objects`). `remembered`
-    bool (H, W), the motion memory: a segment judged still stays dynamic where it covers it (`memory_share`);
-    given, the result carries `moved`.
+    segmentation that leaves no segment, nothing is matched (`CullingResult.without_objects`).
     """
     h, w = depth_cur.shape
     entropy = motion_entropy(pose_cov)
@@ -480,7 +465,6 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     decisions = []
     n_labels = int(labels.max())
     moving_label = np.zeros(n_labels + 1, bool)
-    tested_moving = np.zeros(n_labels + 1, bool)  # moving by the motion test's own scores
     thr_label = np.full(n_labels + 1, thr)
     object_level = config.threshold.mode == "object" and prev_depth is not None and K is not None
     z_prev = prev_depth[_pixel(p_prev[:, 1], prev_depth.shape[0]), _pixel(p_prev[:, 0], prev_depth.shape[1])] \
@@ -507,7 +491,6 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
         decisions.append(SegmentDecision(lab, "semantic", len(s), median_of_sorted(s) if len(s) else 0.0, moving,
                                          float(thr_label[lab]), by_object))
         moving_label[lab] = moving
-        tested_moving[lab] = moving and judged and len(s) >= config.min_points
     if config.grow_px > 0 and moving_label.any():
         # the grown pixels join their segment, so the local decisions below judge them with its points
         labels = labels.copy()
@@ -520,16 +503,6 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     dynamic = pixels_of(labels, moving_label) if moving_label.any() else np.zeros((h, w), bool)
     if config.local_px > 0 and n_labels and judged:
         dynamic = _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr_label, config)
-    moved = None
-    if remembered is not None:
-        moved = dynamic & pixels_of(labels, tested_moving) if tested_moving.any() else np.zeros((h, w), bool)
-        if judged and remembered.any():
-            # after the local decisions: a paused walker's points agree with the static scene everywhere
-            kept = _remembered_segments(labels, moving_label, remembered, config.memory_share)
-            if kept.any():
-                dynamic = dynamic | pixels_of(labels, kept)
-                decisions = [dataclasses.replace(d, dynamic=True, remembered=True)
-                             if d.kind == "semantic" and kept[d.label] else d for d in decisions]
     exclude = dilate_disc(dynamic, config.dilation_px)
     if config.detect_unknown or not use_sem:
         moving_pts = scores > thr
@@ -543,21 +516,7 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
             clusters |= region
         dynamic |= clusters
         exclude |= dilate_disc(clusters, config.cluster_dilation_px)
-    return CullingResult(dynamic, exclude, decisions, thr, entropy, len(p_prev), scores, p_cur, m.guided, judged,
-                         moved=moved)
-
-
-def _remembered_segments(labels: np.ndarray, moving_label: np.ndarray, remembered: np.ndarray,
-                         share: float, step: int = 4) -> np.ndarray:
-    """bool (L+1,): the still segments of `labels` (H, W) that `remembered` (H, W) covers by at least `share`,
-    counted on every `step`-th pixel."""
-    grid = labels[::step, ::step]
-    n = len(moving_label)
-    area = np.bincount(grid.ravel(), minlength=n)
-    hit = np.bincount(grid[remembered[::step, ::step]], minlength=n)
-    kept = (hit >= share * np.maximum(area, 1)) & (area > 0) & ~moving_label
-    kept[0] = False
-    return kept
+    return CullingResult(dynamic, exclude, decisions, thr, entropy, len(p_prev), scores, p_cur, m.guided, judged)
 
 
 def _trusted_marks(labels: np.ndarray, thr: float, entropy: float | None, config: CullingConfig) -> CullingResult:

@@ -56,17 +56,6 @@ class CullingStageConfig:
     """Compare with the frame this many frames back (the previous one at the start). Slow movers are the hard
     case: between consecutive frames a walking person's points move barely more than static points' noise, so
     a longer baseline separates them."""
-    motion_memory: int = valid(10, 0, 100)
-    """Frames the motion memory spans (0 = off): a segment the motion test finds still stays dynamic where, in
-    at least `motion_memory_hits` of the last this-many compared frames, the test itself found pixels moving
-    (`culling.memory_share` of it). Walkers who start, pause or end a walk look still over `lag_frames`, and
-    their keypoints then enter the map; a wrong mark on the static scene is rarely found moving three times.
-    10 with 3 hits (README, "A motion memory for walkers who pause"): development mean 0.0250 -> 0.0239 m,
-    synthetic rooms 0.0076 -> 0.0072, true-mask oracle 0.0261 -> 0.0258. With a whole-mask memory (undecided
-    segments too) the test whose marks cover 90 % of the view lost 9 of 60 frames."""
-    motion_memory_hits: int = valid(3, 1, 100)
-    """Found moving in this many of those frames: one or two wrong "moving" calls on a static mark must not hold
-    it (2 hits: the 90 %-masked test 0.0036 -> 0.0289 m against its 0.03; 3 hits: 0.0036)."""
     min_kept_features: int = valid(0, 0, 100_000)
     """When culling would leave the tracker fewer features than this, keypoints in the exclusion band (near,
     not on, dynamic objects) are given back in the extractor's order (counted as `features_readmitted`). It
@@ -148,10 +137,6 @@ class CullingStage:
         # Wall time of cull_frame alone (the stage also extracts the frame's ORB, which tracking needs anyway).
         # Not process CPU time: OpenCV's worker threads spin on an idle core and would inflate it.
         self.decision_ms: list[float] = []
-        self.segments_remembered = 0
-        # the motion memory: the last frames' `CullingResult.moved` (None: nothing moved) and their per-pixel sum
-        self.moved: deque[np.ndarray | None] = deque()
-        self.moved_count: np.ndarray | None = None
         # This frame's result, None when nothing was compared (bench/plot_culling.py).
         self.last: CullingResult | None = None
 
@@ -186,13 +171,10 @@ class CullingStage:
             if not self.use_segmentation:
                 cfg = dataclasses.replace(cfg, use_segmentation=False)
             t0 = time.perf_counter()
-            remembered = self._remembered(frame.depth.shape) if self.use_segmentation else None
             res = cull_frame(prev_feats.uv, prev_feats.desc, feats.uv, feats.desc, frame.depth,
                              inputs.potentially_dynamic if self.use_segmentation else None, cov, cfg,
-                             prev_depth, self.camera.K, T_cur_prev, remembered)
+                             prev_depth, self.camera.K, T_cur_prev)
             self.decision_ms.append(1000 * (time.perf_counter() - t0))
-            self._remember(res.moved)
-            self.segments_remembered += sum(s.remembered for s in res.segments)
             removed = res.removed(feats.uv)
             removed = self._readmit(removed, feats.uv, res.dynamic_mask, inputs.info)
             self.compared += 1
@@ -235,31 +217,6 @@ class CullingStage:
         self.history.append(_PastFrame(frame.index, feats, frame.depth))
         return inputs
 
-    def _remembered(self, shape: tuple[int, int]) -> np.ndarray | None:
-        """bool (H, W): pixels found moving in at least `motion_memory_hits` of the last `motion_memory` compared
-        frames; None when the memory is off."""
-        if not self.cfg.motion_memory:
-            return None
-        if self.moved_count is None:
-            return np.zeros(shape, bool)
-        return self.moved_count >= self.cfg.motion_memory_hits
-
-    def _remember(self, moved: np.ndarray | None) -> None:
-        """Add a compared frame's `moved` (H, W) bool (None: nothing) and forget the frame `motion_memory` back."""
-        if not self.cfg.motion_memory:
-            return
-        if moved is not None and moved.any():
-            if self.moved_count is None:
-                self.moved_count = np.zeros(moved.shape, np.uint8)
-            self.moved_count += moved
-        else:
-            moved = None
-        self.moved.append(moved)
-        if len(self.moved) > self.cfg.motion_memory:
-            old = self.moved.popleft()
-            if old is not None and self.moved_count is not None:
-                self.moved_count -= old
-
     def _readmit(self, removed: np.ndarray, uv: np.ndarray, dynamic: np.ndarray, info: dict) -> np.ndarray:
         """`removed` (N,) with band keypoints (removed, not on `dynamic` (H, W)) given back up to the minimum."""
         short = self.cfg.min_kept_features - int((~removed).sum())
@@ -278,8 +235,7 @@ class CullingStage:
                "frames_compared": self.compared, "guided_matching_frames": self.guided,
                "frames_not_judged": self.not_judged, "frames_without_objects": self.without_objects,
                "frames_marks_trusted": self.marks_trusted,
-               "segments_judged": self.segments_judged, "segments_remembered": self.segments_remembered,
-               "object_level_thresholds": self.object_thresholds,
+               "segments_judged": self.segments_judged, "object_level_thresholds": self.object_thresholds,
                "decision_ms_median": float(np.median(self.decision_ms)) if self.decision_ms else None}
         if self.scores is not None:
             out["truth"] = {k: v for k, v in self.scores.summary().items() if k != "restoration_psnr"}

@@ -565,33 +565,3 @@ def test_marks_on_less_of_the_view_than_the_option_says_are_excluded_unjudged():
     assert not any(s.dynamic for s in res.segments) and res.removed(kp1).mean() < 0.02
     never = cull_frame(kp0, ds0, kp1, ds1, d1, wide, COV, CullingConfig(judge_marks_above=1.0), d0, K)
     assert never.marks_trusted and never.removed(kp1).mean() > 0.5
-
-
-def test_a_still_segment_the_memory_saw_moving_stays_dynamic_and_only_tested_motion_is_learnt():
-    """The motion memory (`remembered`): a board the motion test finds still stays dynamic where the memory
-    covers at least `memory_share` of it, and is kept (the paper's still object) where it covers less; `moved`
-    holds the pixels of segments the test itself found moving, never the remembered ones."""
-    (rgb0, d0, _), (rgb1, d1, m1) = two_frames(0.0)
-    kp0, ds0 = orb(rgb0)
-    kp1, ds1 = orb(rgb1)
-    cfg = CullingConfig()
-    none = np.zeros_like(m1)
-    still = cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, cfg, d0, K, remembered=none)
-    assert not any(s.dynamic for s in still.segments) and not still.moved.any()
-    assert cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, cfg, d0, K).moved is None  # no memory, nothing learnt
-    board = split_segments(m1, d1, cfg.min_segment_area, cfg.depth_jump, 2) > 0
-    ys, xs = np.nonzero(board)
-    most = board & (xs.min() + 0.7 * (xs.max() - xs.min()) >= np.arange(board.shape[1]))[None, :]
-    kept = cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, cfg, d0, K, remembered=most)
-    assert all(s.dynamic and s.remembered for s in kept.segments)
-    assert np.array_equal(kept.dynamic_mask, board) and not kept.moved.any()
-    assert precision_recall(kept.removed(kp1), kp1, m1)[1] == 1.0
-    few = board & (xs.min() + 0.3 * (xs.max() - xs.min()) >= np.arange(board.shape[1]))[None, :]
-    assert not any(s.dynamic for s in cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, cfg, d0, K,
-                                                 remembered=few).segments)
-    (rgb0, d0, _), (rgb1, d1, m1) = two_frames(0.06)
-    kp0, ds0 = orb(rgb0)
-    kp1, ds1 = orb(rgb1)
-    moving = cull_frame(kp0, ds0, kp1, ds1, d1, m1, COV, cfg, d0, K, remembered=none)
-    assert any(s.dynamic and not s.remembered for s in moving.segments)
-    assert np.array_equal(moving.moved, moving.dynamic_mask)
