@@ -8,7 +8,8 @@ the DeepLabV3 teacher), so MSNET and the teacher are compared in one table (`mar
 each frame's pixels the segmenter marks potentially dynamic).
 
 For each sequence × preset: ATE/RPE, frames tracked, static features used per frame, features removed,
-dynamic-feature precision/recall and mask IoU (when the sequence has `truth/`), restoration PSNR and depth
+dynamic-feature precision/recall, the dynamic keypoints kept although segmentation marked them (culling's misses)
+and never marked (segmentation's), mask IoU (when the sequence has `truth/`), restoration PSNR and depth
 error, ms per frame of culling and restoration, and end-to-end fps. Benchmarks print figures; they assert nothing.
 
 `--summary` adds each preset's mean, min and max over the sequences: give it several sequences of one kind
@@ -75,6 +76,7 @@ def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, override
         "kept": info.get("features_kept"), "removed": info.get("features_removed"),
         "restored_feats": info.get("restored_features"),
         "precision": ct.get("feature_precision"), "recall": ct.get("feature_recall"), "iou": ct.get("mask_iou"),
+        "missed_cull": ct.get("feature_missed_by_culling"), "missed_seg": ct.get("feature_missed_by_segmentation"),
         "psnr": rt.get("restoration_psnr"), "depth_err": rt.get("restoration_depth_median_m"),
         "seg_ms": m["timings_ms"].get("segmentation"), "cull_ms": m["timings_ms"].get("culling"),
         "rest_ms": m["timings_ms"].get("restoration"), "fps": m.get("fps"),
@@ -117,10 +119,11 @@ def main() -> None:
     if any(k < 0 for k in starts):
         ap.error("--starts must be >= 0")
     print("| sequence | preset | frames | tracked | marked area | ATE rmse (m) | RPE t (m/s) | RPE r (°/s) "
-          "| static feats/frame | removed/frame | restored feats/frame | dyn. precision | dyn. recall | mask IoU "
+          "| static feats/frame | removed/frame | restored feats/frame | dyn. precision | dyn. recall "
+          "| dyn. missed: culling / segmentation | mask IoU "
           "| restore PSNR (dB) | restore depth err (cm) | seg ms | cull ms (with ORB) | cull decision ms "
           "| guided frames | restore ms | fps |")
-    print("|" + "---|" * 22)
+    print("|" + "---|" * 23)
     rows = []
     for spec in args.sequence:
         seq_dir, _, camera = spec.rpartition(":")
@@ -157,9 +160,17 @@ def print_row(r: dict) -> None:
     print(f"| {r['sequence']} | {r['preset']} | {r['frames']} | {r['tracked']} | {marked} | {_fmt(r['ate'], 4)} | "
           f"{_fmt(r['rpe_t'], 4)} | {_fmt(r['rpe_r'], 2)} | {_fmt(r['kept'], 0)} | {_fmt(r['removed'], 1)} | "
           f"{_fmt(r['restored_feats'], 1)} | {_fmt(r['precision'], 2)} | {_fmt(r['recall'], 2)} | "
-          f"{_fmt(r['iou'], 2)} | {_fmt(r['psnr'], 1)} | {_fmt(r['depth_err'], 1, 100)} | "
+          f"{_missed(r)} | {_fmt(r['iou'], 2)} | {_fmt(r['psnr'], 1)} | {_fmt(r['depth_err'], 1, 100)} | "
           f"{_fmt(r['seg_ms'], 1)} | {_fmt(r['cull_ms'], 1)} | {_fmt(r['decision_ms'], 1)} | {r['guided']} | "
           f"{_fmt(r['rest_ms'], 1)} | {_fmt(r['fps'], 1)} |", flush=True)
+
+
+def _missed(r: dict) -> str:
+    """The dynamic keypoints kept although segmentation marked them (culling's misses) / never marked (its own),
+    as shares of all dynamic keypoints; "–" without truth or segmentation."""
+    if r["missed_cull"] is None:
+        return "–"
+    return f"{100 * r['missed_cull']:.1f} % / {100 * r['missed_seg']:.1f} %"
 
 
 def print_summary(rows: list[dict]) -> None:

@@ -250,6 +250,7 @@ class TruthScores:
         self.truth = truth
         self._iou: list[float] = []
         self._tp = self._fp = self._fn = 0
+        self._fn_marked: int | None = None  # kept keypoints on the truth that segmentation had marked
         self._psnr: list[float] = []
 
     def add_mask(self, index: int, pred: np.ndarray) -> float:
@@ -258,11 +259,17 @@ class TruthScores:
         self._iou.append(iou)
         return iou
 
-    def add_features(self, index: int, removed: np.ndarray, kept: np.ndarray, border_px: int = 3) -> PrecisionRecall:
+    def add_features(self, index: int, removed: np.ndarray, kept: np.ndarray, border_px: int = 3,
+                     marked: np.ndarray | None = None) -> PrecisionRecall:
         """Keypoints (N, 2) / (M, 2) as (x, y) that culling removed / kept in frame `index` (removed ones within
-        `border_px` of the truth mask count as correct, see `feature_precision_recall`)."""
-        pr = feature_precision_recall(removed, kept, self.truth.mask(index), border_px)
+        `border_px` of the truth mask count as correct, see `feature_precision_recall`). `marked` bool (H, W),
+        segmentation's potentially dynamic pixels, splits the kept dynamic keypoints into culling's misses (marked,
+        judged still) and segmentation's (never marked)."""
+        truth = self.truth.mask(index)
+        pr = feature_precision_recall(removed, kept, truth, border_px)
         self._tp, self._fp, self._fn = self._tp + pr.tp, self._fp + pr.fp, self._fn + pr.fn
+        if marked is not None:
+            self._fn_marked = (self._fn_marked or 0) + int((_on_mask(kept, truth) & _on_mask(kept, marked)).sum())
         return pr
 
     def add_restoration(self, index: int, restored: np.ndarray, region: np.ndarray) -> float:
@@ -274,9 +281,15 @@ class TruthScores:
 
     def summary(self) -> dict:
         """{"mask_iou": mean, "feature_precision", "feature_recall" (pooled over frames), "restoration_psnr": mean,
-        "frames_scored": {...}}; a score with no frames is None."""
+        "frames_scored": {...}}; a score with no frames is None. With segmentation also the dynamic keypoints'
+        shares kept although marked (`feature_missed_by_culling`) and kept unmarked (`feature_missed_by_segmentation`),
+        which add up to 1 - recall."""
         tp, fp, fn = self._tp, self._fp, self._fn
-        return {
+        split = {}
+        if self._fn_marked is not None and tp + fn:
+            split = {"feature_missed_by_culling": self._fn_marked / (tp + fn),
+                     "feature_missed_by_segmentation": (fn - self._fn_marked) / (tp + fn)}
+        return {**split,
             "mask_iou": float(np.mean(self._iou)) if self._iou else None,
             "feature_precision": (tp / (tp + fp) if tp + fp else 1.0) if tp + fp + fn else None,
             "feature_recall": (tp / (tp + fn) if tp + fn else 1.0) if tp + fp + fn else None,

@@ -49,6 +49,9 @@ def test_full_pipeline_culls_restores_and_reports(dyn_seq, tmp_path):
     truth = m["culling"]["truth"]
     # the truth counts removed keypoints more than 3 px off the object as false: the 15 px band costs precision
     assert truth["feature_precision"] > 0.7 and truth["frames_scored"]["mask"] == 44
+    # the oracle's marks are the truth: every dynamic keypoint kept is culling's miss, none segmentation's
+    assert truth["feature_missed_by_segmentation"] == 0.0
+    assert truth["feature_missed_by_culling"] == pytest.approx(1 - truth["feature_recall"])
     assert m["restoration"]["restored_frames"] > 0 and m["restoration"]["truth"]["restoration_psnr"] > 10
     assert {"culling", "restoration", "tracking"} <= set(m["timings_ms"])
     with (tmp_path / "frame_stats.csv").open() as fh:

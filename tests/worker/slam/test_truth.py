@@ -140,3 +140,25 @@ def test_scores_accumulate_over_frames(tmp_path):
     s = scores.summary()
     assert s["mask_iou"] == 1.0 and s["feature_precision"] == 1.0 and s["feature_recall"] == 1.0
     assert s["restoration_psnr"] == 100.0 and s["frames_scored"] == {"mask": 3, "restoration": 3}
+
+
+def test_kept_dynamic_keypoints_split_into_culling_and_segmentation_misses(tmp_path):
+    """Of the keypoints on the truth mask, the kept ones that segmentation had marked are culling's misses, the
+    unmarked ones segmentation's; with the removed ones they are every dynamic keypoint."""
+    from worker.slam.truth import TruthScores
+
+    frames = _write_tiny(tmp_path)
+    ids = frames[0][2]
+    ys, xs = np.nonzero(ids)
+    on = np.c_[xs, ys].astype(float)[:6]  # six keypoints on the mover
+    marked = np.zeros(ids.shape, bool)
+    marked[ys[0], xs[0]] = marked[ys[1], xs[1]] = True  # segmentation marked two of the kept four
+    scores = TruthScores(load_truth(tmp_path))
+    scores.add_features(0, on[4:], np.r_[on[:4], [[5.0, 5.0]]], marked=marked)
+    s = scores.summary()
+    assert s["feature_recall"] == pytest.approx(2 / 6)
+    assert s["feature_missed_by_culling"] == pytest.approx(2 / 6)
+    assert s["feature_missed_by_segmentation"] == pytest.approx(2 / 6)
+    plain = TruthScores(load_truth(tmp_path))
+    plain.add_features(0, on[4:], on[:4])
+    assert "feature_missed_by_culling" not in plain.summary()  # no segmentation, no split

@@ -98,6 +98,8 @@
     ["Mask IoU", "the culled region against the true moving-object masks", ["culling", "truth", "mask_iou"], (x) => num(x, 3)],
     ["Dynamic-feature precision", "of the features removed, the share that lay on true movers", ["culling", "truth", "feature_precision"], pct],
     ["Dynamic-feature recall", "of the features on true movers, the share removed", ["culling", "truth", "feature_recall"], pct],
+    ["Missed by culling", "of the features on true movers, the share segmentation marked but culling kept", ["culling", "truth", "feature_missed_by_culling"], pct],
+    ["Missed by segmentation", "of the features on true movers, the share segmentation never marked", ["culling", "truth", "feature_missed_by_segmentation"], pct],
     ["Restoration PSNR", "restored pixels against the true background", ["restoration", "truth", "restoration_psnr"], (x) => num(x, 1, "dB")],
     ["Restored depth, median error", "restored depth against the true background's", ["restoration", "truth", "restoration_depth_median_m"], metres],
   ];

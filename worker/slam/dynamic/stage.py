@@ -196,7 +196,8 @@ class CullingStage:
                 inputs.info["motion_entropy"] = res.entropy
             if self.scores is not None and ctx.truth is not None and frame.index < len(ctx.truth):
                 self.scores.add_mask(frame.index, res.dynamic_mask)
-                self.scores.add_features(frame.index, feats.uv[removed], feats.uv[~removed])
+                self.scores.add_features(frame.index, feats.uv[removed], feats.uv[~removed],
+                                         marked=inputs.potentially_dynamic if self.use_segmentation else None)
         elif self.use_segmentation and inputs.potentially_dynamic is not None and len(feats):
             # Nothing to compare with yet (first frame): keep potentially dynamic objects out of the new map.
             inputs.exclude_mask = dilate_disc(inputs.potentially_dynamic, self.cfg.culling.dilation_px)
