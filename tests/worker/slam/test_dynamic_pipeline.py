@@ -72,8 +72,8 @@ def test_no_restoration_and_geometry_only_run(dyn_seq, tmp_path):
 @pytest.mark.parametrize("judge_above", [0.0, 0.5])
 def test_static_object_of_dynamic_class_is_kept_where_geometry_judges_it(dyn_seq, tmp_path, judge_above):
     """With `undecided_dynamic` off and a still 'person' (the truth mask of frame 0 on every frame, over static
-    background), culling that judges every mark (`judge_marks_above` 0) finds it static and keeps its features;
-    (the default); at 0.5 a mark on less than half the view is excluded unjudged, in every frame culling
+    background), culling that judges every mark (`judge_marks_above` 0, the default) finds it static and keeps
+    its features; at 0.5 a mark on less than half the view is excluded unjudged, in every frame culling
     compares."""
     seq = Sequence(dyn_seq)
     cfg = get_preset("no-restoration", {"culling.culling.undecided_dynamic": False,

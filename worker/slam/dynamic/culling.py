@@ -443,8 +443,8 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     if use_sem and not config.detect_unknown and not labels.any():
         empty = np.zeros((h, w), bool)
         return CullingResult(empty, empty, [], thr, entropy, 0, np.zeros(0), np.zeros((0, 2)), without_objects=True)
-    if use_sem and potentially_dynamic is not None and not config.detect_unknown \
-            and potentially_dynamic.mean() <= config.judge_marks_above:
+    if config.judge_marks_above > 0 and use_sem and potentially_dynamic is not None and not config.detect_unknown \
+            and potentially_dynamic.mean() <= config.judge_marks_above:  # off (0): no pass over the mask
         return _trusted_marks(labels, thr, entropy, config)
     # Keypoints on objects are matched exhaustively (a search radius would keep only their small motions and
     # bias the decision towards "static"); the static rest, when a pose is predicted, by the guided search.
