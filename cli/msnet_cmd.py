@@ -24,7 +24,8 @@ def _shared_default() -> str:
 def train_command(
     config: Annotated[str, typer.Option(help="Preset (cpu-tum = the shipped recipe, cpu-real = real people at scale, "
                                              "cpu-real-mnv2 = its data on a pretrained MobileNetV2 path, "
-                                             "cpu-tum-ft and cpu-real-tum-ft = fine-tunes needing --init, "
+                                             "cpu-tum-ft, cpu-real-tum-ft and cpu-real-mnv2-neg = fine-tunes "
+                                             "needing --init, "
                                              "cpu, paper, smoke) or a JSON "
                                              "file (keys of TrainConfig; optional \"preset\" base).")] = "cpu-tum",
     out: Annotated[Path | None, typer.Option(help="Output folder (checkpoints, metrics.jsonl).")] = None,
@@ -46,8 +47,10 @@ def train_command(
     from worker.slam.segmentation.train.config import load_train_config
     from worker.slam.segmentation.train.trainer import train
 
-    if config == "cpu-tum-ft" and init is None and not resume:
-        raise typer.BadParameter("cpu-tum-ft continues a cpu-tum run: pass --init RUN/msnet.pt", param_hint="--init")
+    base = {"cpu-tum-ft": "cpu-tum", "cpu-real-tum-ft": "cpu-real", "cpu-real-mnv2-neg": "cpu-real-mnv2"}
+    if config in base and init is None and not resume:
+        raise typer.BadParameter(f"{config} continues a {base[config]} run: pass --init RUN/msnet.pt",
+                                 param_hint="--init")
     cfg = load_train_config(config, out_dir=str(out) if out else None, epochs=epochs, batch_size=batch_size, lr=lr,
                             samples_per_epoch=samples_per_epoch, time_budget_min=time_budget_min,
                             init_weights=str(init) if init else None, shared_dir=shared_dir or _shared_default())

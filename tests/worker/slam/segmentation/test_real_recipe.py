@@ -18,7 +18,7 @@ from worker.slam.segmentation.train.augment import IGNORE
 from worker.slam.segmentation.train.config import load_train_config, presets
 from worker.slam.segmentation.train.data import build_training_data, check_allowed, expand
 from worker.slam.segmentation.train.datasets import load_mask_folder
-from worker.slam.segmentation.train.mixture import MixtureDataset, SoftSet
+from worker.slam.segmentation.train.mixture import MixtureDataset, SoftSet, has_person
 from worker.slam.segmentation.train.trainer import train
 
 
@@ -53,7 +53,7 @@ def _fake_shared(root: Path) -> Path:
 
 def test_bonn_crowd_dev_is_forbidden_whatever_the_config_says(tmp_path: Path) -> None:
     shared = _fake_shared(tmp_path / "shared")
-    for name in ("cpu-real-mnv2", "cpu-real", "cpu-real-tum-ft", "cpu-tum", "cpu", "smoke"):
+    for name in ("cpu-real-mnv2", "cpu-real-mnv2-neg", "cpu-real", "cpu-real-tum-ft", "cpu-tum", "cpu", "smoke"):
         cfg = replace(presets()[name], shared_dir=str(shared), forbidden=())  # even with an emptied list
         with pytest.raises(ConfigError, match="forbidden"):
             expand(cfg, ("{shared}/data/bonn_crowd_dev/rgb/*.jpg",))
@@ -131,3 +131,20 @@ def test_cpu_real_trains_end_to_end_on_a_small_copy(tmp_path: Path) -> None:
     assert model.cfg == TINY and meta["train_config"]["mask_dirs"]
     record = json.loads((tmp_path / "run" / "metrics.jsonl").read_text().splitlines()[-1])
     assert record["val_split"] == "val" and np.isfinite(record["loss"])
+
+
+def test_person_free_photos_are_drawn_as_often_as_their_weight_says(tmp_path: Path) -> None:
+    """`person_free_weight` w: a labelled image without people is drawn w times as often as one with people; 1 keeps
+    the uniform draw of the older recipes (the same samples for the same seed)."""
+    shared = _fake_shared(tmp_path / "shared")
+    people = load_mask_folder(shared / "data" / "ccp_persons", "person")[:3]
+    empty = [replace(people[0], mask=None, instances=(), partial=False)]  # a photo of anything else
+    assert has_person(people[0]) and not has_person(empty[0])
+    cfg = replace(presets()["cpu-real"], model=TINY, p_labelled=1.0, p_negative=0.0, samples_per_epoch=4000)
+    uniform = MixtureDataset(cfg, people + empty, None, SoftSet([], None), [])
+    assert uniform.labelled_p is None
+    weighted = MixtureDataset(replace(cfg, person_free_weight=3.0), people + empty, None, SoftSet([], None), [])
+    assert weighted.labelled_p is not None and np.allclose(weighted.labelled_p, [1 / 6, 1 / 6, 1 / 6, 1 / 2])
+    draws = [weighted._pick_labelled(np.random.default_rng([0, 0, i])) for i in range(4000)]
+    assert abs(np.mean(np.asarray(draws) == 3) - 0.5) < 0.03
+    assert load_train_config("cpu-real-mnv2-neg").person_free_weight > 1

@@ -39,6 +39,19 @@ class MixtureDataset(Dataset):
         self.chairs = [c for c in cutouts if c.label not in (0, self.classes.index("person"))] if cutouts else []
         self.distractors = [c for c in cutouts if c.label == 0]
         self.targets = targets if targets is not None and targets.images else None
+        self.labelled_p = self._labelled_weights(cfg.person_free_weight)
+
+    def _labelled_weights(self, person_free_weight: float) -> np.ndarray | None:
+        """Sampling probabilities of the labelled images, or None for uniform (the draw older recipes made)."""
+        if person_free_weight == 1.0 or not self.labelled:
+            return None
+        w = np.array([1.0 if has_person(item) else person_free_weight for item in self.labelled])
+        return w / w.sum()
+
+    def _pick_labelled(self, rng: np.random.Generator) -> int:
+        if self.labelled_p is None:
+            return int(rng.integers(len(self.labelled)))
+        return int(rng.choice(len(self.labelled), p=self.labelled_p))
 
     def __len__(self) -> int:
         return self.cfg.samples_per_epoch
@@ -121,7 +134,7 @@ class MixtureDataset(Dataset):
         if target:
             img, hard, soft = self._target(rng)
         elif self.labelled and (not self.backgrounds.images or r < p_target + self.cfg.p_labelled):
-            img, hard, soft, _ = self._labelled(rng, int(rng.integers(len(self.labelled))))
+            img, hard, soft, _ = self._labelled(rng, self._pick_labelled(rng))
         elif r < p_target + self.cfg.p_labelled + self.cfg.p_negative:
             img, hard, soft = self._composite(rng, pastes=False)
         else:
@@ -144,6 +157,13 @@ class MixtureDataset(Dataset):
             "soft": soft_t,
             "kd_mask": kd,
         }
+
+
+def has_person(item: LabelledImage) -> bool:
+    """A mask folder labels its main subject (a person in CCP); polygon sets list their person instances."""
+    if item.mask is not None:
+        return item.mask_label == "person"
+    return any(inst.label == "person" for inst in item.instances)
 
 
 class EpochSampler(Sampler[int]):
