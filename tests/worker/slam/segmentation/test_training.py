@@ -13,7 +13,7 @@ import torch
 from tests.worker.slam.segmentation.test_msnet_model import TINY
 from worker.slam.errors import ConfigError
 from worker.slam.segmentation.msnet import build_msnet
-from worker.slam.segmentation.msnet.checkpoint import load_model
+from worker.slam.segmentation.msnet.checkpoint import export_model, load_model
 from worker.slam.segmentation.train.config import load_train_config, presets
 from worker.slam.segmentation.train.losses import msnet_loss
 from worker.slam.segmentation.train.trainer import train
@@ -92,6 +92,10 @@ def test_fine_tuning_starts_from_the_given_weights(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="architecture"):
         train(replace(base, out_dir=str(tmp_path / "d"), init_weights=str(first), model=replace(TINY, embed_dim=32)),
               progress=False)
+    # An exported checkpoint that narrows the dynamic classes (`export-msnet --dynamic-classes`) still starts one.
+    exported = tmp_path / "exported.pt"
+    export_model(first, exported, dynamic_classes=("person",))
+    train(replace(base, out_dir=str(tmp_path / "e"), init_weights=str(exported), lr=0.0), progress=False)
 
 
 def test_cli_rejects_fine_tuning_without_weights(tmp_path: Path, capsys, monkeypatch) -> None:

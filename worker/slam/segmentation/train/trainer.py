@@ -143,7 +143,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     model = build_msnet(cfg.model).to(device)
     if cfg.init_weights and not (resume and (Path(cfg.out_dir) / "last.pt").is_file()):
         start, _ = load_model(cfg.path(cfg.init_weights))
-        if start.cfg != cfg.model:
+        # Which classes count as dynamic is inference metadata (an exported checkpoint may narrow it), not shape.
+        if replace(start.cfg, dynamic_classes=cfg.model.dynamic_classes) != cfg.model:
             raise ConfigError(f"init_weights {cfg.init_weights}: its architecture differs from the config's model")
         model.load_state_dict(start.state_dict())
         model.train()
