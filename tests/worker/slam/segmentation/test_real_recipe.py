@@ -143,6 +143,8 @@ def test_person_free_photos_are_drawn_as_often_as_their_weight_says(tmp_path: Pa
     cfg = replace(presets()["cpu-real"], model=TINY, p_labelled=1.0, p_negative=0.0, samples_per_epoch=4000)
     uniform = MixtureDataset(cfg, people + empty, None, SoftSet([], None), [])
     assert uniform.labelled_p is None
+    assert [uniform._pick_labelled(np.random.default_rng(i)) for i in range(20)] == \
+        [int(np.random.default_rng(i).integers(4)) for i in range(20)]
     weighted = MixtureDataset(replace(cfg, person_free_weight=3.0), people + empty, None, SoftSet([], None), [])
     assert weighted.labelled_p is not None and np.allclose(weighted.labelled_p, [1 / 6, 1 / 6, 1 / 6, 1 / 2])
     draws = [weighted._pick_labelled(np.random.default_rng([0, 0, i])) for i in range(4000)]

@@ -98,10 +98,11 @@ def test_fine_tuning_starts_from_the_given_weights(tmp_path: Path) -> None:
     train(replace(base, out_dir=str(tmp_path / "e"), init_weights=str(exported), lr=0.0), progress=False)
 
 
-def test_cli_rejects_fine_tuning_without_weights(tmp_path: Path, capsys, monkeypatch) -> None:
+@pytest.mark.parametrize("preset", ["cpu-tum-ft", "cpu-real-tum-ft", "cpu-real-mnv2-neg"])
+def test_cli_rejects_fine_tuning_without_weights(tmp_path: Path, capsys, monkeypatch, preset: str) -> None:
     from cli.errors import run_with_error_mapping
     from cli.main import app
 
-    monkeypatch.setattr("sys.argv", ["vtdslam", "train-msnet", "--config", "cpu-tum-ft", "--out", str(tmp_path)])
+    monkeypatch.setattr("sys.argv", ["vtdslam", "train-msnet", "--config", preset, "--out", str(tmp_path)])
     assert run_with_error_mapping(app) == 2
     assert "--init" in capsys.readouterr().err and not any(tmp_path.iterdir())
