@@ -17,8 +17,8 @@ from worker.slam.segmentation.msnet.checkpoint import load_model
 from worker.slam.segmentation.train.augment import IGNORE
 from worker.slam.segmentation.train.config import load_train_config, presets
 from worker.slam.segmentation.train.data import build_training_data, check_allowed, expand
-from worker.slam.segmentation.train.datasets import load_mask_folder
-from worker.slam.segmentation.train.mixture import MixtureDataset, SoftSet, has_person
+from worker.slam.segmentation.train.datasets import Instance, load_mask_folder
+from worker.slam.segmentation.train.mixture import MixtureDataset, SoftSet
 from worker.slam.segmentation.train.trainer import train
 
 
@@ -139,7 +139,8 @@ def test_person_free_photos_are_drawn_as_often_as_their_weight_says(tmp_path: Pa
     shared = _fake_shared(tmp_path / "shared")
     people = load_mask_folder(shared / "data" / "ccp_persons", "person")[:3]
     empty = [replace(people[0], mask=None, instances=(), partial=False)]  # a photo of anything else
-    assert has_person(people[0]) and not has_person(empty[0])
+    polygons = replace(empty[0], instances=(Instance("chair", ()), Instance("person", ())))
+    assert people[0].labels == {"person"} and not empty[0].labels and polygons.labels == {"chair", "person"}
     cfg = replace(presets()["cpu-real"], model=TINY, p_labelled=1.0, p_negative=0.0, samples_per_epoch=4000)
     uniform = MixtureDataset(cfg, people + empty, None, SoftSet([], None), [])
     assert uniform.labelled_p is None

@@ -40,6 +40,13 @@ class LabelledImage:
     """Only the main subject is labelled (CCP): other pixels of its class may be unlabelled, so the background
     is not a certain negative where a teacher sees that class."""
 
+    @property
+    def labels(self) -> frozenset[str]:
+        """The class names this image labels (a mask folder's main subject, or its polygons' classes)."""
+        if self.mask is not None:
+            return frozenset((self.mask_label,))
+        return frozenset(inst.label for inst in self.instances)
+
 
 def parse_yolo_seg_line(line: str, size: tuple[int, int], id_to_label: dict[int, str], path: Path,
                         lineno: int) -> Instance | None:

@@ -45,7 +45,7 @@ class MixtureDataset(Dataset):
         """Sampling probabilities of the labelled images, or None for uniform (the draw older recipes made)."""
         if person_free_weight == 1.0 or not self.labelled:
             return None
-        w = np.array([1.0 if has_person(item) else person_free_weight for item in self.labelled])
+        w = np.array([1.0 if "person" in item.labels else person_free_weight for item in self.labelled])
         return w / w.sum()
 
     def _pick_labelled(self, rng: np.random.Generator) -> int:
@@ -157,13 +157,6 @@ class MixtureDataset(Dataset):
             "soft": soft_t,
             "kd_mask": kd,
         }
-
-
-def has_person(item: LabelledImage) -> bool:
-    """A mask folder labels its main subject (a person in CCP); polygon sets list their person instances."""
-    if item.mask is not None:
-        return item.mask_label == "person"
-    return any(inst.label == "person" for inst in item.instances)
 
 
 class EpochSampler(Sampler[int]):
