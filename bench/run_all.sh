@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Every benchmark table of the README's Results section, in one go (not timed end to end).
+# Every benchmark table of the README's Results section (first block), then the tables of the experiment logs in
+# docs/results/, in one go (not timed end to end).
 # Needs ../shared (or VTD_SHARED_DIR). Generated sequences go to $BENCH_DIR (default: a temp folder).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -7,11 +8,48 @@ PY=.venv/bin/python
 SHARED="${VTD_SHARED_DIR:-$(cd .. && pwd)/shared}"
 BENCH_DIR="${BENCH_DIR:-$(mktemp -d)}"
 ORACLE15='{"segmentation": {"source": "truth"}, "culling": {"culling": {"dilation_px": 15}}}'  # true masks, 15 px band
+TEACHER="$SHARED/models/deeplabv3_257_mv_gpu.tflite"
 echo "## generated sequences in $BENCH_DIR"
 .venv/bin/vtdslam synth "$BENCH_DIR/synth" --frames 200 --people 2 > /dev/null
+for seed in 1 2 3; do
+    .venv/bin/vtdslam synth "$BENCH_DIR/synth$seed" --frames 200 --people 2 --seed "$seed" > /dev/null
+done
 .venv/bin/vtdslam synth "$BENCH_DIR/synth0" --frames 200 --people 0 > /dev/null  # the same room, people-free
 .venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
     "$BENCH_DIR/aug" > /dev/null
+SEEDS8=()
+for seed in 0 1 2 3 4 5 6 7; do
+    .venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
+        "$BENCH_DIR/aug_s$seed" --frames 300 --seed "$seed" > /dev/null
+    SEEDS8+=(--sequence "$BENCH_DIR/aug_s$seed:7scenes")
+done
+
+echo "# README, Results"
+echo "## Bonn (evaluation only): every preset from frames 0, 2, 4 and 6, the teacher's masks beside"
+$PY bench/bench_dynamic.py --sequence "$SHARED/data/bonn_crowd_dev:bonn" \
+    --presets orb-only,geometry-only,no-restoration,full --starts 0,2,4,6 --summary --teacher "$TEACHER"
+echo "## development sequences: eight augmented seeds, the synthetic room, static redkitchen (300 frames)"
+$PY bench/bench_dynamic.py "${SEEDS8[@]}" --sequence "$BENCH_DIR/synth:tum3" \
+    --sequence "$SHARED/data/7scenes_redkitchen:7scenes" --presets no-restoration --max-frames 300 --summary
+echo "## synthetic rooms, seeds 0-3"
+$PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth:tum3" --sequence "$BENCH_DIR/synth1:tum3" \
+    --sequence "$BENCH_DIR/synth2:tum3" --sequence "$BENCH_DIR/synth3:tum3" --presets no-restoration \
+    --max-frames 300 --summary
+echo "## the true-mask oracle beside people-free and masks-removed (eight seeds)"
+$PY bench/bench_dynamic.py "${SEEDS8[@]}" --presets no-restoration --max-frames 300 --summary --references \
+    --config '{"segmentation": {"source": "truth"}}'
+echo "## 7-Scenes redkitchen, 1000 frames"
+$PY bench/bench_dynamic.py --sequence "$SHARED/data/7scenes_redkitchen:7scenes" --presets orb-only,no-restoration \
+    --max-frames 1000
+echo "## speed per stage"
+$PY bench/bench_realtime.py --presets orb-only,geometry-only,no-restoration,full --no-orbslam3
+echo "## MSNET on the real held-out sets"
+$PY bench/bench_msnet.py --threads 1 --shared "$SHARED" --cache "$BENCH_DIR/msnet_cache"
+echo "## restoration against the true background"
+$PY bench/bench_inpainting.py "$BENCH_DIR/synth" $(for seed in 0 1 2 3 4 5 6 7; do echo "$BENCH_DIR/aug_s$seed"; done) \
+    --frames 12 --references both-sided --unseen-fill harmonic,telea --speed
+
+echo "# docs/results (experiment logs)"
 echo "## SLAM core (7-Scenes redkitchen, 1000 frames)"; $PY bench/bench_slam.py
 echo "## dynamic presets"
 $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/aug:7scenes" --sequence "$BENCH_DIR/synth:tum3" \
@@ -24,20 +62,10 @@ $PY bench/bench_dynamic.py --sequence "$BENCH_DIR/synth:tum3" --presets no-resto
     --config '{"segmentation": {"source": "truth"}}'
 echo "## five augmented sequences (seeds 0-4, first 300 frames): means and spread over people placements"
 SEEDS=(--sequence "$BENCH_DIR/aug:7scenes")
-for seed in 1 2 3 4; do
-    .venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
-        "$BENCH_DIR/aug_s$seed" --frames 300 --seed "$seed" > /dev/null
-    SEEDS+=(--sequence "$BENCH_DIR/aug_s$seed:7scenes")
-done
+for seed in 1 2 3 4; do SEEDS+=(--sequence "$BENCH_DIR/aug_s$seed:7scenes"); done
 $PY bench/bench_dynamic.py "${SEEDS[@]}" --presets orb-only,no-restoration --max-frames 300 --summary --references
 $PY bench/bench_dynamic.py "${SEEDS[@]}" --presets no-restoration --max-frames 300 --summary --config "$ORACLE15"
 echo "## all eight seeds (0-7): MSNET with the references, and the true-mask oracle (no band change)"
-SEEDS8=("${SEEDS[@]}")
-for seed in 5 6 7; do
-    .venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
-        "$BENCH_DIR/aug_s$seed" --frames 300 --seed "$seed" > /dev/null
-    SEEDS8+=(--sequence "$BENCH_DIR/aug_s$seed:7scenes")
-done
 $PY bench/bench_dynamic.py "${SEEDS8[@]}" --presets no-restoration --max-frames 300 --summary --references
 $PY bench/bench_dynamic.py "${SEEDS8[@]}" --presets no-restoration --max-frames 300 --summary \
     --config '{"segmentation": {"source": "truth"}}'
@@ -94,9 +122,7 @@ KF_MAJORITY='{"dense": {"carve_every": 0, "carve_min_through": 2, "carve_majorit
 for extra in "$KF_TWO" "$KF_MAJORITY"; do
     $PY bench/bench_map.py "${BONN_MAP[@]}" --methods points+carve --config "$extra"
 done
-.venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
-    "$BENCH_DIR/aug_s0_300" --frames 300 --seed 0 > /dev/null
-SEQ0="$BENCH_DIR/aug_s0_300:7scenes"
+SEQ0="$BENCH_DIR/aug_s0:7scenes"
 for extra in '{}' "$KF_TWO" "$KF_MAJORITY"; do
     $PY bench/bench_map.py --sequence "$BENCH_DIR/synth:tum3" --sequence "$BENCH_DIR/demo:tum3" \
         --sequence "$BENCH_DIR/aug_s1:7scenes" --sequence "$SEQ0" --sequence "$SHARED/data/7scenes_redkitchen:7scenes" \

@@ -45,7 +45,7 @@ class FeatureConfig:
     plain kitchen around augmented seed 7's textured person 2x the keypoints and the development means
     `no-restoration` 0.0262 -> 0.0244, `geometry-only` 0.1145 -> 0.0539, `orb-only` 0.2354 -> 0.1451 m, but on
     real footage it lost: Bonn means `geometry-only` 0.0282 -> 0.0689, `orb-only` 0.0440 -> 0.1039, static
-    7-Scenes 1000 frames 0.0402 -> 0.0421 (README, "Over-detection"). 3 stays."""
+    7-Scenes 1000 frames 0.0402 -> 0.0421 (docs/results/segmentation.md, "Over-detection"). 3 stays."""
     fast_threshold: int = valid(10, 1, 255)
     """FAST threshold; low, so weakly textured grid cells still get corners (the grid keeps the best)."""
     grid_cell_px: int = valid(40, 4, 1_024)
@@ -74,7 +74,7 @@ class TrackingConfig:
     """Virtual stereo baseline that turns depth into a third (right-image) reprojection residual; it sets
     how much keypoint depth weighs in pose optimisation: ORB-SLAM2's ~0.08 (TUM), for cameras whose depth is
     registered to colour (`Camera.depth_registered`). On the synthetic rooms it halves the ATE against 0.01
-    (README, "Settings chosen by measurement")."""
+    (docs/results/settings.md)."""
     unregistered_baseline_m: float = valid(0.01, 0.0001, 10.0)
     """The same for cameras whose depth is not registered to colour (7-Scenes): a keypoint's depth may belong
     to a neighbouring surface, so it weighs less (static 7-Scenes: 0.0224 m here against 0.0260 at 0.08)."""
@@ -88,8 +88,7 @@ class TrackingConfig:
     """Each pose is also solved with every match weighted by how established its map point is: matched in n
     frames, weight min(n / N, 1), at least 1 / N. That pose replaces the plain one when they differ by more than
     `established_disagree_m` (people walking together outnumbering the static matches drag the plain solve;
-    points that kept still for many frames do not move with them). 0 = off (README, "Settings chosen by
-    measurement")."""
+    points that kept still for many frames do not move with them). 0 = off (docs/results/settings.md)."""
     established_disagree_m: float = valid(0.01, 0.0, 10.0)
     """Translation between the plain and the weighted pose beyond which the weighted one is taken."""
     rescue_with_held_back: bool = True
@@ -156,7 +155,7 @@ class MappingConfig:
     """Covisible keyframes each new keyframe fuses map points with (ORB-SLAM2's SearchInNeighbors with 10: a
     keypoint matched to a neighbour's point gains the observation); 0 turns it off. Off: with 10 (or 5) the
     development means of `geometry-only` fell 50 % (19 %) but `orb-only`'s rose 7 % (4 %), which the rule
-    written before measuring did not allow (README, "Map-point fusion")."""
+    written before measuring did not allow (docs/results/dynamic.md, "Map-point fusion")."""
     fuse_radius_px: float = valid(3.0, 0.5, 100.0)
     """Search radius of fusion at octave 0 (grows with the octave's scale)."""
     fuse_merge: bool = False
@@ -206,10 +205,10 @@ class DenseConfig:
     """TSDF truncation band in voxels (`method: tsdf`)."""
     carve: bool = True
     """Drop map points that other frames' measured depth sees through: what was there only for a while, e.g. a
-    person segmentation missed (`worker.slam.mapping.carve`; README Results, "Dense map", for why it is on)."""
+    person segmentation missed (`worker.slam.mapping.carve`; docs/results/dense-map.md, for why it is on)."""
     carve_every: int = valid(3, 0, 1000)
     """Every n-th tracked frame's measured depth votes in carving, at its final pose (0: the keyframes only):
-    the frames between keyframes see behind people that few keyframes do (README, "Dense map")."""
+    the frames between keyframes see behind people that few keyframes do (docs/results/dense-map.md)."""
     carve_max_views: int = valid(1000, 1, 100_000)
     """At most this many frames kept for carving (77 kB each at 640x480, stride 4); a longer run thins them."""
     carve_min_through: int = valid(3, 1, 1000)
@@ -217,7 +216,7 @@ class DenseConfig:
     or pose would carve static surfaces)."""
     carve_majority: bool = False
     """Also require that the point was seen through more often than seen (the rule until 2026-12-04): keeps
-    people who stay in view for many keyframes, so off (README, "Dense map")."""
+    people who stay in view for many keyframes, so off (docs/results/dense-map.md)."""
 
 
 @dataclass

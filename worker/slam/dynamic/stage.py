@@ -68,7 +68,7 @@ class CullingStageConfig:
     budget and leave the pale room around it a hundred keypoints; extracted alone, the room gives the full
     budget. Only frames culling compared (not the first) and only with segmentation: `geometry-only`'s
     exclusion is culling's alone, and refilling around it cost its development mean 0.1145 -> 0.1200 m. 0.5,
-    the only value tried, against 0 (README "MSNET segmentation", 2026-12-05): development mean 0.0268 ->
+    the only value tried, against 0 (docs/results/segmentation.md, 2026-12-05): development mean 0.0268 ->
     0.0262 m, 2893 -> 2900/2900 tracked; true-mask oracle on the eight augmented seeds 0.0290 -> 0.0264 m,
     2396 -> 2400/2400. Adding the refilled keypoints to the kept ones instead was worse (0.0275 m). 0 = off."""
 

@@ -62,7 +62,7 @@ def ring_shift(ring: Ring, ref_grey: np.ndarray, ref_valid: np.ndarray, T_rt: np
     if args is None:
         return 0, 0
     # every second shift first, then the best one's neighbours: a third of the full search's cost, and the
-    # same choice on the augmented frames (README, "Background restoration")
+    # same choice on the augmented frames (docs/results/restoration.md)
     coarse = np.arange(-radius, radius + 1, 2)
     shifts = np.stack(np.meshgrid(coarse, coarse, indexing="ij"), -1).reshape(-1, 2)
     dy, dx = shifts[int(np.argmax(_zncc_per_shift(*args, shifts)))]

@@ -8,8 +8,7 @@ frames, varying across the hole). A rigid correction of the relative pose fits a
 included: the reference is rendered at its current relative pose into the target view (`warp.forward_warp`),
 and OpenCV's photometric RGB-D odometry (`cv2.Odometry`, RGB type: the reference's depth, both images'
 intensities; Steinbruecker et al.) aligns that rendering with the target's static pixels, at half resolution.
-An option, off by default: it pays where poses come from elsewhere, not from the tracker (README, "Background
-restoration").
+An option, off by default: it pays where poses come from elsewhere, not from the tracker (docs/results/restoration.md).
 """
 from __future__ import annotations
 
@@ -35,8 +34,8 @@ class PoseRefinementConfig:
     """Off by default: with the tracker's poses (consistent with the images they were estimated from) the
     pipeline's restored keyframes gained 0.08 dB on the augmented sequences, and the alignment costs ~14 ms per
     reference at half scale (a 15 % hole with three references 32 -> 68-71 ms on an augmented frame, above the
-    50 ms budget); with external poses a few pixels off (7-Scenes' ground truth) it gains 1.7 dB (README,
-    "Background restoration")."""
+    50 ms budget); with external poses a few pixels off (7-Scenes' ground truth) it gains 1.7 dB
+    (docs/results/restoration.md)."""
     scale: float = valid(0.5, 0.125, 1.0)
     """Image scale the alignment runs at (0.5: half resolution)."""
     min_static_fraction: float = valid(0.1, 0.0, 1.0)

@@ -51,7 +51,7 @@ class RestorationStageConfig:
     segmentation's masks miss a person's fringe (hair, a hand, the outline of a coarse mask), and a reference
     copies that fringe into the hole. On the development sequences (`full`, shipped MSNET) 8 raised the restored
     keyframes' PSNR against the true background on all nine, mean 15.3 -> 15.8 dB (augmented), and lowered
-    their depth error 3.3 -> 2.8 cm; 16 gave 16.1 dB but 2.9 cm (README, "Background restoration"). 0 = off."""
+    their depth error 3.3 -> 2.8 cm; 16 gave 16.1 dB but 2.9 cm (docs/results/restoration.md). 0 = off."""
     references: str = "both-sided"
     """Where reference frames come from: "both-sided" (the `window` frames before and after the target; for
     jobs, which have the whole sequence) or "causal" (only the frames before; for streaming input)."""
