@@ -32,15 +32,15 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from worker.slam.camera import parse_camera  # noqa: E402
+from worker.slam.features.depth import backproject  # noqa: E402
 from worker.slam.geometry.se3 import pose_distance  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
-from worker.slam.io.trajectory import read_tum_trajectory  # noqa: E402
+from worker.slam.io.trajectory import Trajectory, read_tum_trajectory, write_tum_trajectory  # noqa: E402
 
 INLIER_M = 0.05
 """Depth differences within this count as agreement (beyond it: another surface, or occlusion)."""
@@ -70,8 +70,7 @@ def depth_agreement(z_i: np.ndarray, z_j: np.ndarray, T_ij: np.ndarray, K: np.nd
     ys, xs = np.mgrid[0:h:step, 0:w:step]
     z = z_j[ys, xs]
     ok = z > 0
-    X = np.stack([(xs[ok] - K[0, 2]) / K[0, 0] * z[ok], (ys[ok] - K[1, 2]) / K[1, 1] * z[ok], z[ok]], 1)
-    X = X @ T_ij[:3, :3].T + T_ij[:3, 3]
+    X = backproject(np.stack([xs[ok], ys[ok]], 1), z[ok], K) @ T_ij[:3, :3].T + T_ij[:3, 3]
     front = X[:, 2] > 0.1
     X = X[front]
     u = np.round(X[:, 0] / X[:, 2] * K[0, 0] + K[0, 2]).astype(int)
@@ -109,8 +108,8 @@ def register_depth(depth_mm: np.ndarray, K_depth: np.ndarray, K_colour: np.ndarr
     ys, xs = np.mgrid[0:h, 0:w]
     ok = (depth_mm > 0) & (depth_mm < 65535)
     z = depth_mm[ok].astype(np.float64) / 1000.0
-    x = (xs[ok] - K_depth[0, 2]) / K_depth[0, 0] * z - lever_x_m
-    y = (ys[ok] - K_depth[1, 2]) / K_depth[1, 1] * z
+    x, y, _ = backproject(np.stack([xs[ok], ys[ok]], 1), z, K_depth).T
+    x = x - lever_x_m
     u = np.round(K_colour[0, 0] * x / z + K_colour[0, 2]).astype(int)
     v = np.round(K_colour[1, 1] * y / z + K_colour[1, 2]).astype(int)
     inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
@@ -140,12 +139,9 @@ def write_registered(seq: Sequence, out: Path, colour_focal: float, lever_x_m: f
             (out / "data" / path.name).symlink_to(path.resolve())
     lever = np.eye(4)
     lever[0, 3] = lever_x_m
-    with open(src / "groundtruth.txt") as fi, open(out / "groundtruth.txt", "w") as fo:
-        traj = read_tum_trajectory(src / "groundtruth.txt")
-        fo.write("".join(line for line in fi if line.startswith("#")))
-        for t, T in zip(traj.timestamps, traj.poses @ lever):
-            q = Rotation.from_matrix(T[:3, :3]).as_quat()
-            fo.write(f"{t:.6f} {T[0, 3]:.7f} {T[1, 3]:.7f} {T[2, 3]:.7f} {q[0]:.7f} {q[1]:.7f} {q[2]:.7f} {q[3]:.7f}\n")
+    gt = read_tum_trajectory(src / "groundtruth.txt")
+    write_tum_trajectory(out / "groundtruth.txt", Trajectory(gt.timestamps, gt.poses @ lever),
+                         f"ground truth of the colour camera ({lever_x_m:g} m along the depth camera's x)")
     camera = cam.to_dict() | {"fx": colour_focal, "fy": colour_focal, "depth_registered": True,
                               "name": f"{cam.name}-registered-{colour_focal:g}"}
     (out / "camera.json").write_text(json.dumps(camera, indent=1))
