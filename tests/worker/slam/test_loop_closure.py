@@ -45,6 +45,19 @@ def test_pose_graph_closes_a_drifted_loop():
     assert np.allclose(fixed[0], drifted[0])  # the gauge node did not move
 
 
+def test_pose_graph_edge_without_translation_weight_constrains_rotation_only():
+    odometry = exp_se3(np.r_[0.5, 0.0, 0.0, 0.0, 0.0, 0.0])  # says: 0.5 m along x, not rotated
+    strong = exp_se3(np.r_[0.0, 0.3, 0.0, 0.0, 0.0, 0.1])  # says: 0.3 m along y, 0.1 rad about z, weighted 100x
+    edges = [(0, 1, odometry, 1.0), (0, 1, strong, 100.0)]
+    start = np.stack([np.eye(4), odometry])
+    rot_only = optimize_pose_graph(start, edges, trans_weights=np.array([1.0, 0.0]))
+    both = optimize_pose_graph(start, edges)
+    for out in (rot_only, both):  # the rotation follows the strong edge either way
+        assert np.allclose(out[1][:3, :3], strong[:3, :3], atol=2e-3)
+    assert np.allclose(rot_only[1][:3, 3], odometry[:3, 3], atol=1e-3)  # its translation is not weighed
+    assert np.allclose(both[1][:3, 3], strong[:3, 3], atol=0.02)
+
+
 def test_place_recognition_scores_revisits_highest():
     rng = np.random.default_rng(0)
     places = [rng.integers(0, 256, (400, 32), dtype=np.uint8) for _ in range(8)]

@@ -23,13 +23,17 @@ def _exp_batch(x: np.ndarray) -> np.ndarray:
 
 
 def optimize_pose_graph(poses: np.ndarray, edges: list[tuple[int, int, np.ndarray, float]], fixed: int = 0,
-                        rot_weight: float = 1.0, max_nfev: int = 50) -> np.ndarray:
-    """Optimised (N,4,4) T_WC from initial `poses` and edges (i, j, Z_ij 4x4, weight). Node `fixed` is held."""
+                        rot_weight: float = 1.0, max_nfev: int = 50,
+                        trans_weights: np.ndarray | None = None) -> np.ndarray:
+    """Optimised (N,4,4) T_WC from initial `poses` and edges (i, j, Z_ij 4x4, weight). Node `fixed` is held.
+    `trans_weights` (E,), default 1, scales each edge's translation residual (0: the edge constrains rotation
+    only)."""
     n = len(poses)
     ii = np.array([e[0] for e in edges])
     jj = np.array([e[1] for e in edges])
     Zinv = inv(np.stack([e[2] for e in edges]))
     w = np.sqrt(np.array([e[3] for e in edges]))[:, None]
+    wt = np.ones((len(edges), 1)) if trans_weights is None else np.asarray(trans_weights, float)[:, None]
     free = np.array([k for k in range(n) if k != fixed])
     slot = np.full(n, -1)
     slot[free] = np.arange(len(free))
@@ -42,7 +46,7 @@ def optimize_pose_graph(poses: np.ndarray, edges: list[tuple[int, int, np.ndarra
     def residual(x: np.ndarray) -> np.ndarray:
         T = current(x)
         E = Zinv @ inv(T[ii]) @ T[jj]
-        r = np.hstack([E[:, :3, 3], rot_weight * Rotation.from_matrix(E[:, :3, :3]).as_rotvec()])
+        r = np.hstack([wt * E[:, :3, 3], rot_weight * Rotation.from_matrix(E[:, :3, :3]).as_rotvec()])
         return (w * r).ravel()
 
     rows, cols = [], []
