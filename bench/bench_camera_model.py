@@ -14,6 +14,13 @@ Three tables, all from the images and the sequence's ground truth (nothing is fi
 3. *Trajectory against depth* (with `--estimate`): the same depth comparison for frame pairs 5-15 and 150+ frames
    apart, at the ground truth's relative poses and at the estimate's.
 
+4. *Depth edges in a pose graph* (with `--estimate --pose-graph`): the estimate's frames every `--node-every`
+   become nodes linked by the estimate's own relative poses; node pairs at least five nodes apart whose views
+   overlap are aligned by ICP (OpenCV's `cv2.Odometry`, depth type, half resolution, started at the estimate's
+   relative pose) and kept as edges where the alignment raised the depth agreement; each frame takes its
+   nearest node's correction. ATE and its Sim(3) scale before and after, for several edge weights, with and
+   without the edges' translation. An offline test of the lead that the long-range table suggests.
+
 `--write-registered OUT --colour-focal F [--lever-x M]` also writes a copy of the sequence whose depth is
 registered to the colour camera (depth pixels back-projected with the camera's intrinsics, moved by the lever
 arm, projected with focal F, nearest surface kept), a `camera.json` with focal F and `depth_registered`, and the
@@ -28,19 +35,25 @@ import argparse
 import json
 import shutil
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
 import numpy as np
+from evo.core import metrics, sync
+from evo.core.trajectory import PoseTrajectory3D
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from worker.slam.camera import parse_camera  # noqa: E402
+from worker.slam.evaluation.metrics import evaluate  # noqa: E402
 from worker.slam.features.depth import backproject  # noqa: E402
-from worker.slam.geometry.se3 import pose_distance  # noqa: E402
+from worker.slam.geometry.se3 import inv, orthonormalize, pose_distance  # noqa: E402
+from worker.slam.inpainting.warp import depth_in_target, forward_warp  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.io.trajectory import Trajectory, read_tum_trajectory, write_tum_trajectory  # noqa: E402
+from worker.slam.mapping.pose_graph import optimize_pose_graph  # noqa: E402
 
 INLIER_M = 0.05
 """Depth differences within this count as agreement (beyond it: another surface, or occlusion)."""
@@ -148,12 +161,113 @@ def write_registered(seq: Sequence, out: Path, colour_focal: float, lever_x_m: f
     print(f"\nwrote {out}: depth registered to a colour camera of focal {colour_focal:g}, lever {lever_x_m:g} m")
 
 
+def _half(K: np.ndarray) -> np.ndarray:
+    """Intrinsics of an image halved by taking every second pixel (pixel centres: x' = x / 2)."""
+    return np.array([[K[0, 0] / 2, 0, K[0, 2] / 2], [0, K[1, 1] / 2, K[1, 2] / 2], [0, 0, 1.0]])
+
+
+def render_depth(z: np.ndarray, T_ts: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """(H, W) float32 m: source depth `z` (H, W) seen from a target camera (T_ts: source -> target), 0 where
+    nothing lands (nearest surface kept)."""
+    h, w = z.shape
+    landed = forward_warp(z, z > 0, T_ts, K, (0, h, 0, w))
+    seen = landed[..., 0] >= 0
+    out = np.zeros((h, w), np.float32)
+    out[seen] = depth_in_target(z, landed[seen], T_ts, K)
+    return out
+
+
+def icp_edges(nodes: list[int], est: dict[int, np.ndarray], depth_of: Callable[[int], np.ndarray],
+              K: np.ndarray, min_gap: int = 5) -> list[tuple[int, int, np.ndarray, float, float]]:
+    """(node a, node b, relative pose T_ab (b camera -> a camera), agreement before, after) for node pairs at
+    least `min_gap` nodes apart whose estimated views overlap (<= 0.6 m, <= 20°), aligned by ICP at half
+    resolution from the estimate's relative pose; only alignments that raised the depth agreement to >= 0.7 and
+    moved the pose by <= 0.15 m and 5°."""
+    Kh = _half(K)
+    settings = cv2.OdometrySettings()
+    settings.setCameraMatrix(Kh.astype(np.float32))
+    settings.setMaxDepth(4.0)
+    odometry = cv2.Odometry(cv2.OdometryType_DEPTH, settings, cv2.OdometryAlgoType_COMMON)
+    small = {i: np.ascontiguousarray(depth_of(i)[::2, ::2], np.float32) for i in nodes}
+    out = []
+    for ia, a in enumerate(nodes):
+        for ib in range(ia + min_gap, len(nodes)):
+            b = nodes[ib]
+            metres, radians = pose_distance(est[a], est[b])
+            if metres > 0.6 or np.degrees(radians) > 20:
+                continue
+            T_ab = inv(est[a]) @ est[b]
+            ok, Rt = odometry.compute(render_depth(small[b], T_ab, Kh), small[a])
+            if not ok:
+                continue
+            T_new = Rt @ T_ab
+            before = depth_agreement(small[a], small[b], T_ab, Kh, step=1)[0]
+            after = depth_agreement(small[a], small[b], T_new, Kh, step=1)[0]
+            moved_m, moved_rad = pose_distance(T_ab, T_new)
+            if after >= max(0.7, before) and moved_m <= 0.15 and np.degrees(moved_rad) <= 5:
+                out.append((ia, ib, T_new, before, after))
+    return out
+
+
+def _sim3(gt: Trajectory, traj: Trajectory) -> tuple[float, float]:
+    """(ATE rmse m after a Sim(3) alignment, its scale)."""
+    ref, est = sync.associate_trajectories(_to_evo(gt), _to_evo(traj), max_diff=0.02)
+    scale = est.align(ref, correct_scale=True)[2]
+    ape = metrics.APE(metrics.PoseRelation.translation_part)
+    ape.process_data((ref, est))
+    return float(ape.get_statistic(metrics.StatisticsType.rmse)), float(scale)
+
+
+def _to_evo(traj: Trajectory) -> PoseTrajectory3D:
+    return PoseTrajectory3D(poses_se3=list(traj.poses), timestamps=np.asarray(traj.timestamps))
+
+
+def depth_pose_graph(seq: Sequence, est_traj: Trajectory, est: dict[int, np.ndarray], gt: dict[int, np.ndarray],
+                     depth_of: Callable[[int], np.ndarray], node_every: int) -> None:
+    """Print the depth-edge pose-graph test (table 4 of the module's docstring)."""
+    nodes = [k for k in sorted(est) if k % node_every == 0]
+    edges = icp_edges(nodes, est, depth_of, seq.camera.K)
+    err = np.array([pose_distance(inv(gt[nodes[a]]) @ gt[nodes[b]], inv(est[nodes[a]]) @ est[nodes[b]])
+                    + pose_distance(inv(gt[nodes[a]]) @ gt[nodes[b]], T) for a, b, T, _, _ in edges
+                    if nodes[a] in gt and nodes[b] in gt])
+    print(f"\nDepth edges ({len(nodes)} nodes every {node_every} frames, {len(edges)} ICP edges kept)\n")
+    print("| relative poses of the kept pairs | depth agreement | translation error, median (mm) | "
+          "rotation error, median (°) |")
+    print("|---|---|---|---|")
+    print(f"| estimate | {np.mean([e[3] for e in edges]):.3f} | {1000 * np.median(err[:, 0]):.1f} | "
+          f"{np.degrees(np.median(err[:, 1])):.2f} |")
+    print(f"| ICP | {np.mean([e[4] for e in edges]):.3f} | {1000 * np.median(err[:, 2]):.1f} | "
+          f"{np.degrees(np.median(err[:, 3])):.2f} |")
+    node_poses = np.stack([est[k] for k in nodes])
+    chain = [(i, i + 1, inv(node_poses[i]) @ node_poses[i + 1], 1.0) for i in range(len(nodes) - 1)]
+    nearest = np.clip(np.round((np.arange(len(seq)) - nodes[0]) / node_every).astype(int), 0, len(nodes) - 1)
+    frame_of = {t: int(np.argmin(np.abs(seq.timestamps - t))) for t in est_traj.timestamps}
+    gt_traj = seq.groundtruth
+    assert gt_traj is not None
+    print("\n| trajectory | ICP edge weight (chain: 1) | ATE rmse (m) | Sim(3) ATE (m) | Sim(3) scale |")
+    print("|---|---|---|---|---|")
+    variants = [("estimate", 0.0, False)] + [(f"pose graph, {part}", w, part == "rotation only")
+                                             for part in ("full edges", "rotation only") for w in (0.3, 1.0, 3.0)]
+    for label, weight, rot_only in variants:
+        poses = est_traj.poses
+        if weight:
+            graph = chain + [(a, b, T, weight) for a, b, T, _, _ in edges]
+            tw = np.r_[np.ones(len(chain)), np.full(len(edges), 0.0 if rot_only else 1.0)]
+            corr = orthonormalize(optimize_pose_graph(node_poses, graph, trans_weights=tw)) @ inv(node_poses)
+            poses = np.stack([corr[nearest[frame_of[t]]] @ T for t, T in zip(est_traj.timestamps, poses)])
+        traj = Trajectory(est_traj.timestamps, orthonormalize(poses))
+        sim_ate, scale = _sim3(gt_traj, traj)
+        print(f"| {label} | {weight:g} | {evaluate(gt_traj, traj).ate.rmse:.4f} | {sim_ate:.4f} | {scale:.3f} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sequence", required=True, help="DIR:CAMERA")
     ap.add_argument("--estimate", type=Path, help="a run's trajectory.txt (TUM format, every frame)")
     ap.add_argument("--colour-focals", default="480,500,515,525,535,550,565,585,600")
     ap.add_argument("--depth-focals", default="525,555,585,615")
+    ap.add_argument("--pose-graph", action="store_true", help="with --estimate: the depth-edge pose graph test")
+    ap.add_argument("--node-every", type=int, default=10, help="pose-graph nodes every n frames")
     ap.add_argument("--write-registered", type=Path, help="write the registered copy of the sequence here")
     ap.add_argument("--colour-focal", type=float, default=525.0)
     ap.add_argument("--lever-x", type=float, default=0.025, help="colour camera's offset along depth x (m)")
@@ -227,6 +341,8 @@ def main() -> None:
         e = np.array([depth_agreement(frame(i)[1], frame(j)[1], np.linalg.inv(est[i]) @ est[j], cam.K)[0]
                       for i, j in pairs])
         print(f"| {label} | {len(pairs)} | {g.mean():.3f} | {e.mean():.3f} | {np.mean(e > g):.0%} |")
+    if args.pose_graph:
+        depth_pose_graph(seq, est_traj, est, poses, lambda i: frame(i)[1], args.node_every)
 
 
 if __name__ == "__main__":
