@@ -3,7 +3,7 @@
     .venv/bin/python bench/bench_camera_model.py --sequence ../shared/data/7scenes_redkitchen:7scenes \
         [--estimate RUN/trajectory.txt]
 
-Three tables, all from the images and the sequence's ground truth (nothing is fitted to ATE):
+Up to four tables, all from the images and the sequence's ground truth (nothing is fitted to ATE):
 
 1. *Colour focal length*: ORB matches between colour frames 20 and 40 apart, and the epipolar (Sampson)
    distance of each match under the ground-truth relative pose, for a range of focal lengths (principal point
@@ -240,8 +240,8 @@ def depth_pose_graph(seq: Sequence, est_traj: Trajectory, est: dict[int, np.ndar
           f"{np.degrees(np.median(err[:, 3])):.2f} |")
     node_poses = np.stack([est[k] for k in nodes])
     chain = [(i, i + 1, inv(node_poses[i]) @ node_poses[i + 1], 1.0) for i in range(len(nodes) - 1)]
-    nearest = np.clip(np.round((np.arange(len(seq)) - nodes[0]) / node_every).astype(int), 0, len(nodes) - 1)
-    frame_of = {t: int(np.argmin(np.abs(seq.timestamps - t))) for t in est_traj.timestamps}
+    node_arr = np.array(nodes)
+    nearest = {t: int(np.argmin(np.abs(node_arr - np.argmin(np.abs(seq.timestamps - t))))) for t in est_traj.timestamps}
     gt_traj = seq.groundtruth
     assert gt_traj is not None
     print("\n| trajectory | ICP edge weight (chain: 1) | ATE rmse (m) | Sim(3) ATE (m) | Sim(3) scale |")
@@ -254,7 +254,7 @@ def depth_pose_graph(seq: Sequence, est_traj: Trajectory, est: dict[int, np.ndar
             graph = chain + [(a, b, T, weight) for a, b, T, _, _ in edges]
             tw = np.r_[np.ones(len(chain)), np.full(len(edges), 0.0 if rot_only else 1.0)]
             corr = orthonormalize(optimize_pose_graph(node_poses, graph, trans_weights=tw)) @ inv(node_poses)
-            poses = np.stack([corr[nearest[frame_of[t]]] @ T for t, T in zip(est_traj.timestamps, poses)])
+            poses = np.stack([corr[nearest[t]] @ T for t, T in zip(est_traj.timestamps, poses)])
         traj = Trajectory(est_traj.timestamps, orthonormalize(poses))
         sim_ate, scale = _sim3(gt_traj, traj)
         print(f"| {label} | {weight:g} | {evaluate(gt_traj, traj).ate.rmse:.4f} | {sim_ate:.4f} | {scale:.3f} |")
