@@ -41,13 +41,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 from evo.core import metrics, sync
-from evo.core.trajectory import PoseTrajectory3D
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from worker.slam.camera import parse_camera  # noqa: E402
-from worker.slam.evaluation.metrics import evaluate  # noqa: E402
+from worker.slam.evaluation.metrics import evaluate, to_evo  # noqa: E402
 from worker.slam.features.depth import backproject  # noqa: E402
 from worker.slam.geometry.se3 import inv, orthonormalize, pose_distance  # noqa: E402
 from worker.slam.inpainting.warp import depth_in_target, forward_warp  # noqa: E402
@@ -161,11 +160,6 @@ def write_registered(seq: Sequence, out: Path, colour_focal: float, lever_x_m: f
     print(f"\nwrote {out}: depth registered to a colour camera of focal {colour_focal:g}, lever {lever_x_m:g} m")
 
 
-def _half(K: np.ndarray) -> np.ndarray:
-    """Intrinsics of an image halved by taking every second pixel (pixel centres: x' = x / 2)."""
-    return np.array([[K[0, 0] / 2, 0, K[0, 2] / 2], [0, K[1, 1] / 2, K[1, 2] / 2], [0, 0, 1.0]])
-
-
 def render_depth(z: np.ndarray, T_ts: np.ndarray, K: np.ndarray) -> np.ndarray:
     """(H, W) float32 m: source depth `z` (H, W) seen from a target camera (T_ts: source -> target), 0 where
     nothing lands (nearest surface kept)."""
@@ -183,7 +177,8 @@ def icp_edges(nodes: list[int], est: dict[int, np.ndarray], depth_of: Callable[[
     least `min_gap` nodes apart whose estimated views overlap (<= 0.6 m, <= 20°), aligned by ICP at half
     resolution from the estimate's relative pose; only alignments that raised the depth agreement to >= 0.7 and
     moved the pose by <= 0.15 m and 5°."""
-    Kh = _half(K)
+    Kh = K.astype(np.float64).copy()
+    Kh[:2] /= 2  # pixel (u, v) of the every-second-pixel copy is (2u, 2v) of the full image
     settings = cv2.OdometrySettings()
     settings.setCameraMatrix(Kh.astype(np.float32))
     settings.setMaxDepth(4.0)
@@ -211,15 +206,11 @@ def icp_edges(nodes: list[int], est: dict[int, np.ndarray], depth_of: Callable[[
 
 def _sim3(gt: Trajectory, traj: Trajectory) -> tuple[float, float]:
     """(ATE rmse m after a Sim(3) alignment, its scale)."""
-    ref, est = sync.associate_trajectories(_to_evo(gt), _to_evo(traj), max_diff=0.02)
+    ref, est = sync.associate_trajectories(to_evo(gt), to_evo(traj), max_diff=0.02)
     scale = est.align(ref, correct_scale=True)[2]
     ape = metrics.APE(metrics.PoseRelation.translation_part)
     ape.process_data((ref, est))
     return float(ape.get_statistic(metrics.StatisticsType.rmse)), float(scale)
-
-
-def _to_evo(traj: Trajectory) -> PoseTrajectory3D:
-    return PoseTrajectory3D(poses_se3=list(traj.poses), timestamps=np.asarray(traj.timestamps))
 
 
 def depth_pose_graph(seq: Sequence, est_traj: Trajectory, est: dict[int, np.ndarray], gt: dict[int, np.ndarray],

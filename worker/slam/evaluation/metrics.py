@@ -18,7 +18,7 @@ from worker.slam.evaluation.rpe import RpeMode, RpeResult, relative_pose_error
 from worker.slam.evaluation.stats import ErrorStats
 from worker.slam.io.trajectory import Trajectory
 
-__all__ = ["ErrorStats", "EvalResult", "RpeMode", "evaluate"]
+__all__ = ["ErrorStats", "EvalResult", "RpeMode", "evaluate", "to_evo"]
 
 
 @dataclass(frozen=True)
@@ -41,7 +41,8 @@ class EvalResult:
         return out
 
 
-def _to_evo(traj: Trajectory) -> PoseTrajectory3D:
+def to_evo(traj: Trajectory) -> PoseTrajectory3D:
+    """The trajectory as evo's (poses T_WC, timestamps)."""
     return PoseTrajectory3D(poses_se3=list(traj.poses), timestamps=np.asarray(traj.timestamps))
 
 
@@ -59,7 +60,7 @@ def evaluate(groundtruth: Trajectory, estimate: Trajectory, max_diff: float = 0.
     alignment undefined (e.g. an estimate that never moved).
     """
     try:
-        ref, est = sync.associate_trajectories(_to_evo(groundtruth), _to_evo(estimate), max_diff=max_diff)
+        ref, est = sync.associate_trajectories(to_evo(groundtruth), to_evo(estimate), max_diff=max_diff)
     except sync.SyncException as exc:
         raise EvaluationError(f"trajectories do not associate: {exc}") from exc
     if ref.num_poses < 3:
