@@ -213,14 +213,22 @@ def feature_precision_recall(removed: np.ndarray, kept: np.ndarray, truth_mask: 
     `border_px` > 0 also counts a removed keypoint within that distance of the mask as correct: ORB corners sit
     on silhouettes, and a keypoint whose patch straddles a moving object is unstable wherever its centre falls.
     Recall is always over keypoints on the mask itself."""
-    near: np.ndarray = truth_mask
-    if border_px > 0:
-        import cv2
+    return _precision_recall(_on_mask(removed, _near(truth_mask, border_px)), _on_mask(kept, truth_mask))
 
-        size = 2 * border_px + 1
-        near = cv2.dilate(truth_mask.astype(np.uint8), np.ones((size, size), np.uint8)) > 0
-    r, k = _on_mask(removed, near), _on_mask(kept, truth_mask)
-    tp, fp, fn = int(r.sum()), int((~r).sum()), int(k.sum())
+
+def _near(mask: np.ndarray, border_px: int) -> np.ndarray:
+    """bool (H, W): `mask` grown by `border_px` pixels (a square), or `mask` itself for 0."""
+    if border_px <= 0:
+        return mask
+    import cv2
+
+    size = 2 * border_px + 1
+    return cv2.dilate(mask.astype(np.uint8), np.ones((size, size), np.uint8)) > 0
+
+
+def _precision_recall(removed_ok: np.ndarray, kept_dynamic: np.ndarray) -> PrecisionRecall:
+    """From bool (N,) "removed keypoint is on or near the truth" and (M,) "kept keypoint is on the truth"."""
+    tp, fp, fn = int(removed_ok.sum()), int((~removed_ok).sum()), int(kept_dynamic.sum())
     precision = tp / (tp + fp) if tp + fp else 1.0
     recall = tp / (tp + fn) if tp + fn else 1.0
     return PrecisionRecall(precision, recall, tp, fp, fn)
@@ -266,10 +274,11 @@ class TruthScores:
         segmentation's potentially dynamic pixels, splits the kept dynamic keypoints into culling's misses (marked,
         judged still) and segmentation's (never marked)."""
         truth = self.truth.mask(index)
-        pr = feature_precision_recall(removed, kept, truth, border_px)
+        kept_dynamic = _on_mask(kept, truth)  # looked up once: recall and the misses' split both need it
+        pr = _precision_recall(_on_mask(removed, _near(truth, border_px)), kept_dynamic)
         self._tp, self._fp, self._fn = self._tp + pr.tp, self._fp + pr.fp, self._fn + pr.fn
         if marked is not None:
-            self._fn_marked = (self._fn_marked or 0) + int((_on_mask(kept, truth) & _on_mask(kept, marked)).sum())
+            self._fn_marked = (self._fn_marked or 0) + int((kept_dynamic & _on_mask(kept, marked)).sum())
         return pr
 
     def add_restoration(self, index: int, restored: np.ndarray, region: np.ndarray) -> float:
