@@ -46,10 +46,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from worker.slam.camera import parse_camera  # noqa: E402
+from worker.slam.dynamic.epipolar import fundamental_of_pose  # noqa: E402
 from worker.slam.evaluation.metrics import evaluate, to_evo  # noqa: E402
 from worker.slam.features.depth import backproject  # noqa: E402
 from worker.slam.geometry.se3 import inv, orthonormalize, pose_distance  # noqa: E402
-from worker.slam.inpainting.warp import depth_in_target, forward_warp  # noqa: E402
+from worker.slam.inpainting.warp import render_depth  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.io.trajectory import Trajectory, read_tum_trajectory, write_tum_trajectory  # noqa: E402
 from worker.slam.mapping.pose_graph import optimize_pose_graph  # noqa: E402
@@ -58,15 +59,10 @@ INLIER_M = 0.05
 """Depth differences within this count as agreement (beyond it: another surface, or occlusion)."""
 
 
-def _skew(t: np.ndarray) -> np.ndarray:
-    return np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
-
-
 def sampson_px(T_ji: np.ndarray, p_i: np.ndarray, p_j: np.ndarray, K: np.ndarray) -> np.ndarray:
     """(N,) Sampson distances (pixels) of matches `p_i` -> `p_j` (N, 2) under the relative pose T_ji (frame i
     camera -> frame j camera) and intrinsics K."""
-    K_inv = np.linalg.inv(K)
-    F = K_inv.T @ _skew(T_ji[:3, 3]) @ T_ji[:3, :3] @ K_inv
+    F = fundamental_of_pose(T_ji[:3, :3], T_ji[:3, 3], K)
     x_i, x_j = np.c_[p_i, np.ones(len(p_i))], np.c_[p_j, np.ones(len(p_j))]
     Fx, Ftx = x_i @ F.T, x_j @ F
     den = Fx[:, 0] ** 2 + Fx[:, 1] ** 2 + Ftx[:, 0] ** 2 + Ftx[:, 1] ** 2
@@ -160,17 +156,6 @@ def write_registered(seq: Sequence, out: Path, colour_focal: float, lever_x_m: f
     print(f"\nwrote {out}: depth registered to a colour camera of focal {colour_focal:g}, lever {lever_x_m:g} m")
 
 
-def render_depth(z: np.ndarray, T_ts: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """(H, W) float32 m: source depth `z` (H, W) seen from a target camera (T_ts: source -> target), 0 where
-    nothing lands (nearest surface kept)."""
-    h, w = z.shape
-    landed = forward_warp(z, z > 0, T_ts, K, (0, h, 0, w))
-    seen = landed[..., 0] >= 0
-    out = np.zeros((h, w), np.float32)
-    out[seen] = depth_in_target(z, landed[seen], T_ts, K)
-    return out
-
-
 def icp_edges(nodes: list[int], est: dict[int, np.ndarray], depth_of: Callable[[int], np.ndarray],
               K: np.ndarray, min_gap: int = 5) -> list[tuple[int, int, np.ndarray, float, float]]:
     """(node a, node b, relative pose T_ab (b camera -> a camera), agreement before, after) for node pairs at
@@ -192,7 +177,7 @@ def icp_edges(nodes: list[int], est: dict[int, np.ndarray], depth_of: Callable[[
             if metres > 0.6 or np.degrees(radians) > 20:
                 continue
             T_ab = inv(est[a]) @ est[b]
-            ok, Rt = odometry.compute(render_depth(small[b], T_ab, Kh), small[a])
+            ok, Rt = odometry.compute(render_depth(small[b], small[b] > 0, T_ab, Kh)[1], small[a])
             if not ok:
                 continue
             T_new = Rt @ T_ab

@@ -5,7 +5,7 @@ motion-capture or KinectFusion ground truth, or from feature tracking, are a cen
 images, and 7-Scenes' depth comes from a second, unregistered camera: copied texture lands a few pixels away
 from where the target would show it (the ring-shift alignment, `align.py`, measured 1-8 px on augmented
 frames, varying across the hole). A rigid correction of the relative pose fits all of it at once, parallax
-included: the reference is rendered at its current relative pose into the target view (`warp.forward_warp`),
+included: the reference is rendered at its current relative pose into the target view (`warp.render_depth`),
 and OpenCV's photometric RGB-D odometry (`cv2.Odometry`, RGB type: the reference's depth, both images'
 intensities; Steinbruecker et al.) aligns that rendering with the target's static pixels, at half resolution.
 An option, off by default: it pays where poses come from elsewhere, not from the tracker (docs/results/restoration.md).
@@ -20,7 +20,7 @@ import numpy as np
 from worker.slam.config import valid
 from worker.slam.geometry.se3 import pose_distance
 from worker.slam.inpainting.align import Ring, ring_zncc
-from worker.slam.inpainting.warp import depth_in_target, forward_warp
+from worker.slam.inpainting.warp import render_depth
 
 MAX_DEPTH_M = 20.0
 """OpenCV's default (4 m) would drop the far background of a room-sized scene from the alignment."""
@@ -101,16 +101,13 @@ class PoseRefiner:
         mask = self._small(static.astype(np.uint8) * 255, cv2.INTER_NEAREST)
         # rendered with the restoration's own splat: `cv2.warpFrame` floors projected coordinates, a half-pixel
         # shift the alignment would take for a pose error
-        h, w = z.shape
-        landed = forward_warp(z, mask > 0, T_tr, self.K, (0, h, 0, w))
+        landed, wz = render_depth(z, mask > 0, T_tr, self.K)
         seen = landed[..., 0] >= 0
         if np.mean(seen) < self.config.min_static_fraction:
             return T_tr, False
         yx = landed[seen]
         wgrey = np.zeros_like(grey)
         wgrey[seen] = grey[yx[:, 0], yx[:, 1]]
-        wz = np.zeros((h, w), np.float32)
-        wz[seen] = depth_in_target(z, yx, T_tr, self.K)
         seen &= wz > 0
         source = cv2.OdometryFrame(wz, wgrey, seen.astype(np.uint8) * 255)  # wz is 0 wherever not `seen`
         self.odometry.prepareFrame(source)

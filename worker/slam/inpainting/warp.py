@@ -55,6 +55,19 @@ def forward_warp(ref_depth: np.ndarray, ref_valid: np.ndarray, T_tr: np.ndarray,
     return out
 
 
+def render_depth(ref_depth: np.ndarray, ref_valid: np.ndarray, T_tr: np.ndarray,
+                 K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's `ref_valid` pixels of `ref_depth` (H, W) m seen from the target camera, whole image:
+    (landed (H, W, 2) int64 as `forward_warp`, -1 where nothing lands; their depth (H, W) float32 m in the target
+    camera, 0 where nothing lands)."""
+    h, w = ref_depth.shape
+    landed = forward_warp(ref_depth, ref_valid, T_tr, K, (0, h, 0, w))
+    seen = landed[..., 0] >= 0
+    depth = np.zeros((h, w), np.float32)
+    depth[seen] = depth_in_target(ref_depth, landed[seen], T_tr, K)
+    return landed, depth
+
+
 def depth_in_target(ref_depth: np.ndarray, yx: np.ndarray, T_tr: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Depth (N,) in the target camera of reference pixels `yx` (N, 2); 0 where the reference has none."""
     z = ref_depth[yx[:, 0], yx[:, 1]].astype(np.float64)
