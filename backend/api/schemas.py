@@ -155,7 +155,8 @@ class JobOut(BaseModel):
     attempts: int = Field(description="How many times the job was queued: 1 + manual retries + automatic requeues.")
     requeues: int = Field(description="Automatic requeues after its worker died (reset by a manual retry).")
     cancel_requested: bool
-    metrics: dict[str, Any] | None = Field(description="The run's metrics.json once it succeeded.")
+    metrics: dict[str, Any] | None = Field(
+        description="The run's metrics.json once it succeeded (keys and units: formats.run_metrics.RunMetrics).")
 
     model_config = ConfigDict(
         json_schema_extra={
@@ -223,13 +224,15 @@ def eta_seconds(job: Job) -> float | None:
 
 
 class FrameOut(BaseModel):
+    """One frame's statistics (formats.frame_stats.FrameStats)."""
+
     frame_index: int
-    timestamp: float
+    timestamp: float = Field(description="seconds, the sequence's clock")
     tracked: bool
-    n_features: int
-    n_dynamic_removed: int
-    ate_error: float | None
-    timings: dict[str, Any]
+    n_features: int = Field(description="ORB keypoints the tracker saw")
+    n_dynamic_removed: int = Field(description="keypoints culled as dynamic")
+    ate_error: float | None = Field(description="metres after SE(3) alignment; null without a matched ground truth")
+    timings: dict[str, Any] = Field(description="milliseconds by step, where reported")
 
 
 class ArtifactOut(BaseModel):
