@@ -243,6 +243,17 @@ class RunMetrics:
                            finite(culling.get("feature_recall")), finite(restoration.get("restoration_psnr")))
 
 
+def with_current_spelling(blob: Mapping[str, Any]) -> dict[str, Any]:
+    """``blob`` with every key kept as it is, plus an old-spelled ``rpe``'s figures under today's names
+    (``rpe.trans``, ``rpe.rot_deg``), so the api's clients read one spelling; a current blob comes back equal."""
+    out = dict(blob)
+    old, rpe = blob.get("rpe"), RpeMetrics.from_dict(blob.get("rpe"))
+    if isinstance(old, Mapping) and rpe is not None:
+        now = {"trans": rpe.trans.to_dict(), "rot_deg": rpe.rot_deg.to_dict()}
+        out["rpe"] = {**old, **{k: v for k, v in now.items() if not isinstance(old.get(k), Mapping)}}
+    return out
+
+
 def format_run_metrics(metrics: RunMetrics) -> str:
     """The text of a metrics.json (JSON, 2-space indent; NaN written as NaN, as json.dumps does)."""
     return json.dumps(metrics.to_dict(), indent=2)

@@ -9,6 +9,7 @@ from fastapi import Path
 from pydantic import BaseModel, ConfigDict, Field
 
 from formats import artifacts
+from formats.run_metrics import with_current_spelling
 from storage.models import Batch, Job, JobStatus, Sequence
 from storage.presets import DEFAULT_PIPELINE_PRESET
 from storage.repositories.batches import ComparisonRow
@@ -156,7 +157,8 @@ class JobOut(BaseModel):
     requeues: int = Field(description="Automatic requeues after its worker died (reset by a manual retry).")
     cancel_requested: bool
     metrics: dict[str, Any] | None = Field(
-        description="The run's metrics.json once it succeeded (keys and units: formats.run_metrics.RunMetrics).")
+        description="The run's metrics.json once it succeeded (keys and units: formats.run_metrics.RunMetrics; an "
+        "old run's RPE also under today's names rpe.trans and rpe.rot_deg).")
 
     model_config = ConfigDict(
         json_schema_extra={
@@ -211,7 +213,7 @@ class JobOut(BaseModel):
             attempts=job.attempts,
             requeues=job.requeues,
             cancel_requested=job.cancel_requested,
-            metrics=job.metrics.metrics if job.metrics is not None else None,
+            metrics=with_current_spelling(job.metrics.metrics) if job.metrics is not None else None,
         )
 
 

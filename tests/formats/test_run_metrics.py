@@ -5,7 +5,14 @@ from pathlib import Path
 import pytest
 
 from formats.errors import FormatError
-from formats.run_metrics import ErrorStats, RunMetrics, format_run_metrics, read_run_metrics, write_run_metrics
+from formats.run_metrics import (
+    ErrorStats,
+    RunMetrics,
+    format_run_metrics,
+    read_run_metrics,
+    with_current_spelling,
+    write_run_metrics,
+)
 
 STATS = {"rmse": 0.03, "mean": 0.02, "median": 0.02, "std": 0.01, "max": 0.06}
 PIPELINE = {  # a metrics.json as run_pipeline writes it, key order included
@@ -61,3 +68,12 @@ def test_reader_rejects_non_objects(tmp_path: Path):
     (tmp_path / "m.json").write_text("{")
     with pytest.raises(FormatError, match="not JSON"):
         read_run_metrics(tmp_path / "m.json")
+
+
+def test_current_spelling_extends_old_rpe_and_leaves_current_blobs_alone():
+    assert with_current_spelling(PIPELINE) == PIPELINE
+    old = {"fps": 1.0, "rpe": {"trans": {"rmse": 0.011}, "rot": {"rmse": 0.3}}}
+    got = with_current_spelling(old)
+    assert got["rpe"]["rot"] == {"rmse": 0.3} and got["rpe"]["trans"] == {"rmse": 0.011}  # nothing renamed
+    assert got["rpe"]["rot_deg"]["rmse"] == 0.3 and old["rpe"].keys() == {"trans", "rot"}  # the input is untouched
+    assert with_current_spelling({"rpe": {"trans_rmse": 1}})["rpe"]["trans"]["rmse"] == 1
