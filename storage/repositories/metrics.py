@@ -78,8 +78,7 @@ def _frame_row(job_id: str, row: FrameStats | Mapping[str, Any]) -> dict[str, An
         stats = row if isinstance(row, FrameStats) else FrameStats.from_row(row)
     except FormatError as exc:
         raw = json_safe(dict(row)) if isinstance(row, Mapping) else None
-        raise InvalidInput(f"a frame stat needs numeric frame_index and timestamp ({exc.message})",
-                           {"row": raw}) from exc
+        raise InvalidInput(f"a malformed frame stat: {exc.message}", {"row": raw}) from exc
     return {"job_id": job_id, **stats.to_stored(), "timings": json_safe(stats.timings)}
 
 
