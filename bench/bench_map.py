@@ -107,7 +107,9 @@ def check(seq_dir: Path, camera: str, run: Path, references: tuple[Path, int, Pa
     from bench_slam import map_check
     from scipy.spatial import cKDTree
 
+    from formats import artifacts
     from formats.ply import read_ply
+    from formats.run_metrics import read_run_metrics
     from worker.slam.camera import load_camera_file, parse_camera
     from worker.slam.io.sequence import Sequence
     from worker.slam.io.trajectory import read_tum_trajectory
@@ -128,11 +130,11 @@ def check(seq_dir: Path, camera: str, run: Path, references: tuple[Path, int, Pa
         near = cKDTree(people).query(X, k=1)[0] < NEAR_M if len(people) else np.zeros(len(xyz), bool)
     kf_stamps = read_tum_trajectory(run / "keyframes.txt").timestamps
     kf_frames = {int(i) for i in np.flatnonzero(np.isin(np.round(traj.timestamps, 6), np.round(kf_stamps, 6)))}
-    metrics = json.loads((run / "metrics.json").read_text())
+    metrics = read_run_metrics(run / artifacts.METRICS)
     near_share = float(near.mean()) if near is not None and len(xyz) else None
     on_share = float((near & off_static).mean()) if near is not None and off_static is not None and len(xyz) else None
     out = {"map_points": int(len(xyz)), "near_people": near_share, "on_people": on_share,
-           "ate": (metrics.get("ate") or {}).get("rmse"), "dense_ms": (metrics.get("timings_ms") or {}).get("dense")}
+           "ate": metrics.ate.rmse if metrics.ate else None, "dense_ms": metrics.timings_ms.get("dense")}
     out.update(map_check(seq, traj, xyz, kf_frames, 0))
     return out
 

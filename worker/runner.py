@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-from formats.frame_stats import to_stored
+from formats.frame_stats import FrameStats
 
 ProgressFn = Callable[[int, int, str], None]
 """(frames_done, frames_total, stage)."""
@@ -26,11 +26,11 @@ class Cancelled(Exception):
 @dataclass
 class RunOutput:
     metrics: dict[str, Any]
-    """The run's metrics (``metrics.json``)."""
+    """The run's metrics: the content of ``metrics.json`` (formats.run_metrics.RunMetrics reads it)."""
     config: dict[str, Any]
     """The full config snapshot the run used."""
-    frame_stats: list[dict[str, Any]] = field(default_factory=list)
-    """Per frame: formats.frame_stats.STORED_COLUMNS (frame_index, timestamp, tracked required)."""
+    frame_stats: list[FrameStats] = field(default_factory=list)
+    """Per frame, as the service stores them."""
 
 
 class PipelineFn(Protocol):
@@ -76,5 +76,5 @@ def run_slam(
         result = run_pipeline(sequence, config, out_dir, progress=progress, should_cancel=should_cancel)
     except PipelineCancelled as exc:
         raise Cancelled(exc.message) from exc
-    frame_stats = [to_stored(r) for r in result.frame_stats]
+    frame_stats = [FrameStats.from_row(r) for r in result.frame_stats]
     return RunOutput(metrics=result.metrics, config=config.to_dict(), frame_stats=frame_stats)

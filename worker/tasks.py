@@ -28,6 +28,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from formats import artifacts
 from formats.frame_stats import STORED_COLUMNS, format_frame_stats
+from formats.run_metrics import RunMetrics
 from storage.artifacts import ArtifactStore
 from storage.errors import Conflict, NotFound, StorageError
 from storage.jobqueue import register_run_job
@@ -199,7 +200,7 @@ def _run_claimed(
         _preview(out_dir)
         if reporter.stop_reason in ("deleted", "ended"):  # not ours any more: store nothing
             raise Cancelled("the job was deleted" if reporter.stop_reason == "deleted" else "the job was reaped")
-        timings = {**(output.metrics.get("timings_ms") or {}), "run_s": round(run_s, 3)}
+        timings = {**RunMetrics.from_dict(output.metrics).timings_ms, "run_s": round(run_s, 3)}
         saving = True
         _save_results(ctx, session, job_id, out_dir, output)
         status = JobStatus.SUCCEEDED
@@ -267,7 +268,8 @@ def _save_results(ctx: WorkerContext, session: Session, job_id: str, out_dir: Pa
         if path.is_file() and not path.name.startswith("."):
             ctx.store.put_file(job_id, path.name, path)
     if output.frame_stats and not (out_dir / artifacts.FRAME_STATS).is_file():  # a pipeline that writes none
-        ctx.store.write_text(job_id, artifacts.FRAME_STATS, format_frame_stats(output.frame_stats, STORED_COLUMNS))
+        rows = [r.to_stored() for r in output.frame_stats]
+        ctx.store.write_text(job_id, artifacts.FRAME_STATS, format_frame_stats(rows, STORED_COLUMNS))
     metrics.save_run_metrics(session, job_id, output.metrics)
     for i in range(0, len(output.frame_stats), FRAME_STATS_CHUNK):
         metrics.add_frame_stats(session, job_id, output.frame_stats[i : i + FRAME_STATS_CHUNK])

@@ -43,7 +43,7 @@ def content_type(name: str) -> str:
 @router.get("/{job_id}/artifacts", response_model=list[ArtifactOut], responses=error_responses(404))
 def list_artifacts(job_id: JobId, session: SessionDep, store: StoreDep) -> list[ArtifactOut]:
     """The job's finished outputs (trajectory.txt, keyframes.txt, map.ply, metrics.json, config.json,
-    frames.csv, log.txt, preview.png)."""
+    frame_stats.csv, log.txt, preview.png)."""
     jobs.get(session, job_id)
     return [
         ArtifactOut(
@@ -80,7 +80,8 @@ def list_frames(
     limit: Annotated[int, Query(ge=1, le=100_000)] = 10_000,
     offset: Offset = 0,
 ) -> Page[FrameOut]:
-    """Per-frame statistics of a finished run, in frame order (also downloadable as ``frames.csv``)."""
+    """Per-frame statistics of a finished run, in frame order (formats.frame_stats.FrameStats; the pipeline's
+    ``frame_stats.csv`` artifact holds the same frames with its own column names)."""
     jobs.get(session, job_id)
     rows = metrics.get_frame_stats(session, job_id, limit=limit, offset=offset)
     items = [FrameOut.model_validate(r, from_attributes=True) for r in rows]

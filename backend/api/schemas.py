@@ -9,6 +9,7 @@ from fastapi import Path
 from pydantic import BaseModel, ConfigDict, Field
 
 from formats import artifacts
+from formats.run_metrics import with_current_spelling
 from storage.models import Batch, Job, JobStatus, Sequence
 from storage.presets import DEFAULT_PIPELINE_PRESET
 from storage.repositories.batches import ComparisonRow
@@ -155,7 +156,9 @@ class JobOut(BaseModel):
     attempts: int = Field(description="How many times the job was queued: 1 + manual retries + automatic requeues.")
     requeues: int = Field(description="Automatic requeues after its worker died (reset by a manual retry).")
     cancel_requested: bool
-    metrics: dict[str, Any] | None = Field(description="The run's metrics.json once it succeeded.")
+    metrics: dict[str, Any] | None = Field(
+        description="The run's metrics.json once it succeeded (keys and units: formats.run_metrics.RunMetrics; an "
+        "old run's RPE also under today's names rpe.trans and rpe.rot_deg).")
 
     model_config = ConfigDict(
         json_schema_extra={
@@ -210,7 +213,7 @@ class JobOut(BaseModel):
             attempts=job.attempts,
             requeues=job.requeues,
             cancel_requested=job.cancel_requested,
-            metrics=job.metrics.metrics if job.metrics is not None else None,
+            metrics=with_current_spelling(job.metrics.metrics) if job.metrics is not None else None,
         )
 
 
@@ -223,13 +226,15 @@ def eta_seconds(job: Job) -> float | None:
 
 
 class FrameOut(BaseModel):
+    """One frame's statistics (formats.frame_stats.FrameStats)."""
+
     frame_index: int
-    timestamp: float
+    timestamp: float = Field(description="seconds, the sequence's clock")
     tracked: bool
-    n_features: int
-    n_dynamic_removed: int
-    ate_error: float | None
-    timings: dict[str, Any]
+    n_features: int = Field(description="ORB keypoints the tracker saw")
+    n_dynamic_removed: int = Field(description="keypoints culled as dynamic")
+    ate_error: float | None = Field(description="metres after SE(3) alignment; null without a matched ground truth")
+    timings: dict[str, Any] = Field(description="milliseconds by step, where reported")
 
 
 class ArtifactOut(BaseModel):

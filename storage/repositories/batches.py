@@ -9,6 +9,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from formats.run_metrics import RunMetrics as RunMetricsSchema
 from storage.errors import InvalidInput, NotFound
 from storage.models import Batch, Job, RunMetrics, Sequence, new_id
 from storage.repositories import jobs as job_repo
@@ -25,38 +26,23 @@ class ComparisonRow:
     job_id: str | None
     status: str | None
     ate_rmse: float | None
+    """Metres."""
     rpe_trans_rmse: float | None
+    """Metres per RPE interval."""
     rpe_rot_rmse: float | None
+    """Degrees per RPE interval."""
     fps: float | None
+    """Frames per second, whole pipeline."""
     relocalisations: int | None = None
     mask_iou: float | None = None
+    """The rest: formats.run_metrics (RunMetrics.relocalisations, TruthScores)."""
     feature_precision: float | None = None
     feature_recall: float | None = None
     restoration_psnr: float | None = None
+    """dB."""
 
     def as_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
-
-
-def _number(tree: Any, *path: str) -> float | None:
-    """``tree[path[0]][path[1]]...`` if it is a number, else None (absent stage, no truth)."""
-    for key in path:
-        tree = tree.get(key) if isinstance(tree, dict) else None
-    return float(tree) if isinstance(tree, int | float) and not isinstance(tree, bool) else None
-
-
-def truth_scores(metrics: dict[str, Any]) -> dict[str, float | None]:
-    """Scores against a sequence's truth (synthetic or augmented data) from a run's ``metrics.json``.
-
-    The culling stage scores its masks and removed features, the restoration stage its pixels; a preset
-    without the stage, or a sequence without truth, has None.
-    """
-    return {
-        "mask_iou": _number(metrics, "culling", "truth", "mask_iou"),
-        "feature_precision": _number(metrics, "culling", "truth", "feature_precision"),
-        "feature_recall": _number(metrics, "culling", "truth", "feature_recall"),
-        "restoration_psnr": _number(metrics, "restoration", "truth", "restoration_psnr"),
-    }
 
 
 def _unique(items: list[str], what: str) -> list[str]:
@@ -162,8 +148,7 @@ def comparison(session: Session, batch_id: str) -> list[ComparisonRow]:
     for seq_id in batch.sequence_ids:
         for preset in batch.presets:
             r = cells.get((seq_id, preset))
-            blob = r.metrics if r is not None and r.metrics else {}
-            relocs = _number(blob, "relocalisations")
+            run = RunMetricsSchema.from_dict(r.metrics if r is not None and r.metrics else {})
             rows.append(
                 ComparisonRow(
                     sequence_id=seq_id,
@@ -175,8 +160,8 @@ def comparison(session: Session, batch_id: str) -> list[ComparisonRow]:
                     rpe_trans_rmse=r.rpe_trans_rmse if r else None,
                     rpe_rot_rmse=r.rpe_rot_rmse if r else None,
                     fps=r.fps if r else None,
-                    relocalisations=int(relocs) if relocs is not None else None,
-                    **truth_scores(blob),
+                    relocalisations=run.relocalisations,
+                    **dataclasses.asdict(run.truth_scores()),
                 )
             )
     return rows

@@ -1,4 +1,5 @@
-"""Run metrics (one summary row per job) and per-frame statistics."""
+"""Run metrics (one summary row per job) and per-frame statistics, read through the formats schemas
+(formats.run_metrics, formats.frame_stats)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,10 @@ from sqlalchemy import insert, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
+from formats.errors import FormatError
+from formats.frame_stats import FrameStats
+from formats.run_metrics import RunMetrics as RunMetricsSchema
+from formats.run_metrics import finite
 from storage.errors import Conflict, InvalidInput, NotFound
 from storage.models import FrameStat, Job, RunMetrics
 from storage.repositories._common import get_or_raise, writing
@@ -32,46 +37,20 @@ def json_safe(value: Any) -> Any:
     return value
 
 
-def _num(value: Any) -> float | None:
-    try:
-        f = float(value)
-    except (TypeError, ValueError):
-        return None
-    return f if math.isfinite(f) else None
-
-
-def _int(value: Any) -> int | None:
-    f = _num(value)
-    return None if f is None else int(f)
-
-
-def _dig(blob: Mapping[str, Any], *path: str) -> Any:
-    cur: Any = blob
-    for key in path:
-        if not isinstance(cur, Mapping):
-            return None
-        cur = cur.get(key)
-    return cur
-
-
 def summary_columns(blob: Mapping[str, Any]) -> dict[str, Any]:
-    """The indexed columns read from a ``metrics.json`` blob; absent or non-finite values are None.
+    """The indexed columns read from a ``metrics.json`` blob (formats.run_metrics, which also reads the older
+    RPE spellings); absent or non-finite values are None.
 
-    Keys: ``ate.{rmse,mean,median,std,max}``, ``rpe.trans.rmse`` and ``rpe.rot_deg.rmse`` (the pipeline's
-    metrics.json; ``rpe.trans_rmse``/``rpe.rot_rmse`` and ``rpe.rot.rmse`` are read too), ``fps``,
-    ``tracked``, ``lost`` (frame counts).
+    ``ate_{rmse,mean,median,std,max}`` (m), ``rpe_trans_rmse`` (m per interval), ``rpe_rot_rmse`` (degrees per
+    interval), ``fps`` (frames/s), ``tracked``, ``lost`` (frame counts).
     """
-    cols: dict[str, Any] = {
-        f"ate_{k}": _num(_dig(blob, "ate", k)) for k in ("rmse", "mean", "median", "std", "max")
-    }
-    for part, nested in (("trans", ("trans",)), ("rot", ("rot_deg", "rot"))):
-        value = _dig(blob, "rpe", f"{part}_rmse")
-        for key in nested:
-            value = value if value is not None else _dig(blob, "rpe", key, "rmse")
-        cols[f"rpe_{part}_rmse"] = _num(value)
-    cols["fps"] = _num(blob.get("fps"))
-    cols["tracked"] = _int(blob.get("tracked"))
-    cols["lost"] = _int(blob.get("lost"))
+    m = RunMetricsSchema.from_dict(blob)
+    ate = m.ate.to_dict() if m.ate is not None else {}
+    cols: dict[str, Any] = {f"ate_{k}": finite(ate.get(k)) for k in ("rmse", "mean", "median", "std", "max")}
+    cols["rpe_trans_rmse"] = finite(m.rpe.trans.rmse) if m.rpe is not None else None
+    cols["rpe_rot_rmse"] = finite(m.rpe.rot_deg.rmse) if m.rpe is not None else None
+    cols["fps"] = finite(m.fps)
+    cols["tracked"], cols["lost"] = m.tracked, m.lost
     return cols
 
 
@@ -94,29 +73,20 @@ def get_run_metrics(session: Session, job_id: str) -> RunMetrics:
     return row
 
 
-def _frame_row(job_id: str, row: Mapping[str, Any]) -> dict[str, Any]:
+def _frame_row(job_id: str, row: FrameStats | Mapping[str, Any]) -> dict[str, Any]:
     try:
-        index, timestamp = int(row["frame_index"]), float(row["timestamp"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InvalidInput(
-            "a frame stat needs numeric frame_index and timestamp", {"row": json_safe(dict(row))}
-        ) from exc
-    return {
-        "job_id": job_id,
-        "frame_index": index,
-        "timestamp": timestamp,
-        "tracked": bool(row.get("tracked", True)),
-        "n_features": int(row.get("n_features", 0)),
-        "n_dynamic_removed": int(row.get("n_dynamic_removed", 0)),
-        "ate_error": _num(row.get("ate_error")),
-        "timings": json_safe(row.get("timings") or {}),
-    }
+        stats = row if isinstance(row, FrameStats) else FrameStats.from_row(row)
+    except FormatError as exc:
+        raw = json_safe(dict(row)) if isinstance(row, Mapping) else None
+        raise InvalidInput(f"a malformed frame stat: {exc.message}", {"row": raw}) from exc
+    return {"job_id": job_id, **stats.to_stored(), "timings": json_safe(stats.timings)}
 
 
-def add_frame_stats(session: Session, job_id: str, rows: Iterable[Mapping[str, Any]]) -> int:
+def add_frame_stats(session: Session, job_id: str, rows: Iterable[FrameStats | Mapping[str, Any]]) -> int:
     """Bulk-insert per-frame stats (may be called in chunks while running); returns the count.
 
-    Missing optional keys take defaults; a frame index stored twice is a :class:`Conflict`.
+    Rows are :class:`FrameStats` or mappings it reads (missing optional keys take its defaults); a malformed row
+    is :class:`InvalidInput`, a frame index stored twice a :class:`Conflict`.
     """
     values = [_frame_row(job_id, r) for r in rows]
     if not values:
@@ -132,7 +102,7 @@ def add_frame_stats(session: Session, job_id: str, rows: Iterable[Mapping[str, A
 
 def get_frame_stats(
     session: Session, job_id: str, *, limit: int | None = None, offset: int = 0
-) -> list[FrameStat]:
+) -> list[FrameStats]:
     """A job's frame stats in frame order (empty if none were stored)."""
     stmt = (
         select(FrameStat)
@@ -142,4 +112,8 @@ def get_frame_stats(
         .limit(limit)
         .execution_options(populate_existing=True)
     )
-    return list(session.scalars(stmt))
+    return [
+        FrameStats(r.frame_index, r.timestamp, r.tracked, r.n_features, r.n_dynamic_removed, r.ate_error,
+                   dict(r.timings or {}))
+        for r in session.scalars(stmt)
+    ]

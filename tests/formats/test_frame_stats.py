@@ -6,7 +6,9 @@ from formats.errors import FormatError
 from formats.frame_stats import (
     PIPELINE_COLUMNS,
     STORED_COLUMNS,
+    FrameStats,
     format_frame_stats,
+    load_frame_stats,
     read_frame_stats,
     to_stored,
     write_frame_stats,
@@ -40,3 +42,19 @@ def test_reader_needs_the_key_columns(tmp_path: Path):
     (tmp_path / "f.csv").write_text("a,b\n1,2\n")
     with pytest.raises(FormatError, match="frame_index"):
         read_frame_stats(tmp_path / "f.csv")
+
+
+def test_typed_rows_read_either_naming_and_csv_strings(tmp_path: Path):
+    pipeline = FrameStats.from_row({"frame_index": 3, "timestamp": 2.0, "tracked": False, "features": 500,
+                                    "features_removed": 7, "ate_error": 0.01})
+    stored = FrameStats.from_row({"frame_index": 3, "timestamp": 2.0, "tracked": False, "n_features": 500,
+                                  "n_dynamic_removed": 7, "ate_error": 0.01})
+    assert pipeline == stored == FrameStats(3, 2.0, False, 500, 7, 0.01)
+    write_frame_stats(tmp_path / "f.csv", [{"frame_index": 0, "timestamp": 1.5, "tracked": False, "features": 9},
+                                           {"frame_index": 1, "timestamp": 1.6, "tracked": True, "ate_error": 0.2}])
+    assert load_frame_stats(tmp_path / "f.csv") == [FrameStats(0, 1.5, False, 9), FrameStats(1, 1.6, True, 0, 0, 0.2)]
+    assert FrameStats.from_row({"frame_index": "2", "timestamp": "1", "ate_error": "nan"}).ate_error is None
+    for bad in ({"timestamp": 1.0}, {"frame_index": 1.5, "timestamp": 1.0}, {"frame_index": 0, "timestamp": "x"},
+                {"frame_index": 0, "timestamp": 0, "n_features": "many"}):
+        with pytest.raises(FormatError):
+            FrameStats.from_row(bad)

@@ -10,6 +10,7 @@ from typing import Any
 import pytest
 
 from formats.artifacts import PIPELINE_OUTPUTS
+from formats.frame_stats import FrameStats
 from storage.errors import ConfigurationError
 from storage.models import JobStatus, RunMetrics
 from storage.repositories import jobs, metrics, sequences
@@ -40,7 +41,7 @@ class Pipeline:
         time.sleep(self.silent_s)  # work that reports nothing (a global bundle adjustment)
         for name in PIPELINE_OUTPUTS:
             (out_dir / name).write_text(json.dumps(METRICS) if name == "metrics.json" else f"# {name}\n")
-        stats = [{"frame_index": i, "timestamp": float(i), "tracked": True} for i in range(self.frames)]
+        stats = [FrameStats(i, float(i), tracked=True) for i in range(self.frames)]
         if self.before_return:
             self.before_return()
         return RunOutput(metrics=dict(METRICS), config={"name": preset}, frame_stats=stats)

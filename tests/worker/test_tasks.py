@@ -10,6 +10,7 @@ import pytest
 from huey import SqliteHuey
 
 from formats.artifacts import PIPELINE_OUTPUTS
+from formats.frame_stats import FrameStats
 from storage.jobqueue import make_enqueue
 from storage.models import JobStatus
 from storage.repositories import jobs, metrics, sequences
@@ -47,7 +48,7 @@ class FakePipeline:
             (out_dir / name).write_text(json.dumps(METRICS) if name == "metrics.json" else f"# {name}\n")
         (out_dir / "trajectory.txt").write_text("".join(f"{100 + i / 30} {i * 0.1} 0 {i * i * 0.01} 0 0 0 1\n"
                                                         for i in range(self.frames)))
-        stats = [{"frame_index": i, "timestamp": 100 + i / 30, "tracked": i != 2} for i in range(self.frames)]
+        stats = [FrameStats(i, 100 + i / 30, tracked=i != 2) for i in range(self.frames)]
         return RunOutput(metrics=dict(METRICS), config={"name": preset, **overrides}, frame_stats=stats)
 
 

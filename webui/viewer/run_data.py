@@ -2,7 +2,7 @@
 
 Artifacts used (all optional except the trajectory): `trajectory.txt` (TUM, T_WC), `groundtruth_aligned.txt`
 (TUM, ground truth expressed in the estimate's frame), `keyframes.txt` (TUM), `map.ply` (binary little-endian
-PLY with float x y z and uchar red green blue), `frame_stats.csv` (`frame_index`, `timestamp`, `ate_error`...),
+PLY with float x y z and uchar red green blue), `frame_stats.csv` (formats.frame_stats: `timestamp`, `ate_error`...),
 `frame_NNNNNN_{rgb,mask,restored}.jpg` (flat names: the artifact store keeps one folder per run).
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 
 from formats import artifacts
 from formats.errors import FormatError
-from formats.frame_stats import read_frame_stats
+from formats.frame_stats import load_frame_stats
 from formats.ply import read_ply
 from formats.trajectory import read_tum_trajectory
 from storage.errors import NotFound
@@ -58,13 +58,16 @@ def _read_map(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
 
 
 def _ate_errors(run_dir: Path, stamps: np.ndarray) -> np.ndarray | None:
+    """Each pose's ATE error (m) from the run's frame stats (formats.frame_stats), matched by timestamp; None
+    without a readable file (the colours are optional)."""
     path = run_dir / artifacts.FRAME_STATS
-    if not path.is_file():
+    try:
+        rows = load_frame_stats(path) if path.is_file() else None
+    except FormatError:
         return None
-    by_time = {}
-    for row in read_frame_stats(path):
-        if row.get("ate_error") not in (None, "", "nan"):
-            by_time[round(float(row["timestamp"]), 4)] = float(row["ate_error"])
+    if rows is None:
+        return None
+    by_time = {round(r.timestamp, 4): r.ate_error for r in rows if r.ate_error is not None}
     return np.array([by_time.get(round(t, 4), np.nan) for t in stamps])
 
 

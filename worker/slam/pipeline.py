@@ -38,6 +38,7 @@ import worker.slam.presets  # noqa: F401 - registers the shipped stages and thei
 from formats import artifacts
 from formats.frame_stats import write_frame_stats
 from formats.ply import write_ply
+from formats.run_metrics import RunMetrics, write_run_metrics
 from worker.slam.config import PipelineConfig
 from worker.slam.errors import ConfigError, EvaluationError, SlamError
 from worker.slam.geometry.se3 import inv, orthonormalize
@@ -380,7 +381,7 @@ def write_outputs(result: RunResult, config: PipelineConfig, out: Path) -> None:
     write_tum_trajectory(out / artifacts.KEYFRAMES, result.keyframes, header="VTD-SLAM keyframes T_WC")
     xyz, rgb = result.cloud if result.cloud is not None else (np.zeros((0, 3)), np.zeros((0, 3), np.uint8))
     write_ply(out / artifacts.MAP, xyz, rgb)
-    (out / artifacts.METRICS).write_text(json.dumps(result.metrics, indent=2))
+    write_run_metrics(out / artifacts.METRICS, RunMetrics.from_dict(result.metrics))
     (out / artifacts.CONFIG).write_text(json.dumps(config.to_dict(), indent=2))
     if result.aligned_groundtruth is not None:
         write_tum_trajectory(out / artifacts.GROUNDTRUTH_ALIGNED, result.aligned_groundtruth,

@@ -136,6 +136,8 @@ def test_running_job_has_progress_and_eta_then_metrics(client, db, settings, seq
         jobs.finish(s, job["id"], JobStatus.SUCCEEDED)
     got = client.get(f"/api/v1/jobs/{job['id']}").json()
     assert got["status"] == "succeeded" and got["metrics"]["ate"]["rmse"] == 0.01 and got["progress"] == 1.0
+    rpe = got["metrics"]["rpe"]  # an old spelling (rot) is served as stored, and under today's name (rot_deg) too
+    assert rpe["rot"] == {"rmse": 0.2} and rpe["rot_deg"]["rmse"] == 0.2 and rpe["trans"] == {"rmse": 0.005}
 
 
 def test_cancel_queued_running_and_finished(client, db, settings, seq_id):

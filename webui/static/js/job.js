@@ -65,7 +65,7 @@
     stats("ATE, absolute trajectory error (m)", m.ate, (x) => num(x, 4));
     if (m.rpe) {
       stats("RPE translation (m per interval)", m.rpe.trans, (x) => num(x, 4));
-      stats("RPE rotation (° per interval)", m.rpe.rot_deg || m.rpe.rot, (x) => num(x, 3));
+      stats("RPE rotation (° per interval)", m.rpe.rot_deg, (x) => num(x, 3));
     }
     const head = el("thead", {}, el("tr", {}, ...["Error", "RMSE", "Mean", "Median", "Std", "Max"].map((h, i) => el("th", { class: i ? "n" : "" }, h))));
     const body = el("tbody", {}, ...rows.map((r) => el("tr", {}, ...r.map((c, i) => el("td", { class: i ? "n" : "" }, c)))));
@@ -146,7 +146,7 @@
   const DESCRIBE = {
     "trajectory.txt": "estimated camera poses T_WC, TUM format", "keyframes.txt": "keyframe poses, TUM format",
     "map.ply": "dense point cloud of the static scene", "metrics.json": "ATE, RPE, speed, timings",
-    "config.json": "full pipeline configuration used", "frames.csv": "per-frame statistics",
+    "config.json": "full pipeline configuration used",
     "frame_stats.csv": "per-frame statistics", "groundtruth_aligned.txt": "ground truth in the estimate's frame",
     "log.txt": "the worker's log of this run", "preview.png": "trajectory sketch (top view)",
   };
@@ -171,12 +171,11 @@
     } else note($("plot-timing"), "This run recorded no stage timings.");
     previews(artifacts.filter((a) => /\.(png|jpe?g)$/i.test(a.name) && a.name !== "preview.png")); // that one is a trajectory sketch
 
-    const fname = names.has("frame_stats.csv") ? "frame_stats.csv" : names.has("frames.csv") ? "frames.csv" : null;
     const optional = (name, parse) => (names.has(name) ? fetchText(name).then(parse, () => null) : Promise.resolve(null));
     let [est, gt, frames] = await Promise.all([ // in parallel: the plots appear after one round trip
       fetchText("trajectory.txt").then(parseTum, (err) => { note($("plot-traj"), "No trajectory: " + err.message); return []; }),
       optional("groundtruth_aligned.txt", parseTum),
-      optional(fname, parseCsv),
+      optional("frame_stats.csv", parseCsv), // formats.frame_stats: timestamp (s), ate_error (m) per frame
     ]);
     if (est.length) topView(est, gt);
     const t0 = est.length ? est[0][0] : 0;
