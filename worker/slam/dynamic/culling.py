@@ -12,29 +12,27 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from worker.slam.config import valid
-from worker.slam.dynamic.epipolar import (
-    Matches,
-    epipolar_distance,
-    fundamental_from_seed,
-    fundamental_of_pose,
-    fundamental_ransac,
-    match_guided,
-    match_orb,
-    predict_positions,
+from worker.slam.dynamic.decisions import (
+    SegmentDecision,
+    Segments,
+    dilate_disc,
+    dynamic_pixels,
+    geometric_regions,
+    grow_segments,
+    judge_segments,
 )
-from worker.slam.dynamic.object_motion import ObjectMotionConfig, estimate_object_motion
-from worker.slam.dynamic.segments import grow_by_depth, pixels_of, split_segments
-from worker.slam.dynamic.sorted_stats import median_of_sorted, quantile_of_sorted
-from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy, object_threshold
-from worker.slam.features.depth import backproject
-from worker.slam.features.grid import PointGrid
-from worker.slam.features.matching import hamming
-from worker.slam.features.search import KeypointIndex
-from worker.slam.geometry.pnp import reprojection_px, sqpnp_ransac
+from worker.slam.dynamic.matching import MatchedPoints, match_frames
+from worker.slam.dynamic.object_motion import ObjectMotionConfig
+from worker.slam.dynamic.pair import FramePair, nearest_pixel
+from worker.slam.dynamic.scoring import score_matches
+from worker.slam.dynamic.segments import split_segments
+from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy
+
+__all__ = ["CullingConfig", "CullingResult", "FramePair", "SegmentDecision", "cull_frame", "cull_pair",
+           "dilate_disc", "mask_at"]
 
 
 @dataclass(frozen=True)
@@ -185,20 +183,6 @@ class CullingConfig:
 
 
 @dataclass(frozen=True)
-class SegmentDecision:
-    label: int
-    kind: str  # "semantic" or "geometric"
-    points: int
-    score: float
-    dynamic: bool
-    threshold_px: float = 0.0
-    """The Δd it was judged against."""
-    object_level: bool = False
-    """True when Δd came from the segment's own motion estimate (`threshold.mode: object`), False when from
-    the frame's (frame mode, or too few points with depth on the segment)."""
-
-
-@dataclass(frozen=True)
 class CullingResult:
     """`dynamic_mask` / `exclude_mask` bool (H, W); per-match `scores` (N,) and `cur_points` (N, 2) px."""
 
@@ -229,205 +213,15 @@ class CullingResult:
 def mask_at(mask: np.ndarray, keypoints_xy: np.ndarray) -> np.ndarray:
     """bool (M,): `mask` (H, W) at the nearest pixel of each keypoint (M, 2) (x, y), clipped to the image."""
     h, w = mask.shape
-    return mask[_pixel(keypoints_xy[:, 1], h), _pixel(keypoints_xy[:, 0], w)] if len(keypoints_xy) \
+    return mask[nearest_pixel(keypoints_xy[:, 1], h), nearest_pixel(keypoints_xy[:, 0], w)] if len(keypoints_xy) \
         else np.zeros(0, bool)
-
-
-def _refine_from(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndarray, config: CullingConfig,
-                 gates: tuple[float, ...] = (8.0, 3.0, 1.0)) -> tuple[np.ndarray, np.ndarray] | None:
-    """(rvec, tvec): the predicted pose T_init refined by Levenberg-Marquardt on the points X (N,3) m seen at
-    uv (N,2) px that it already explains (once per gate, in multiples of `pnp_px`), or None when most disagree.
-    ~10x cheaper than RANSAC, and it converges to the motion of the points near the prediction."""
-    rvec, tvec = cv2.Rodrigues(T_init[:3, :3])[0], T_init[:3, 3].reshape(3, 1).copy()
-    # the prediction can be several pixels off: refine on a wide gate first, then tighten it
-    for gate in gates:
-        inl = reprojection_px(X, uv, K, rvec, tvec) < gate * config.pnp_px
-        if inl.sum() < max(6, config.min_pose_support * len(X)):
-            return None
-        rvec, tvec = cv2.solvePnPRefineLM(X[inl], uv[inl], K, None, rvec, tvec)
-    support = (reprojection_px(X, uv, K, rvec, tvec) < config.pnp_px).mean()
-    return (rvec, tvec) if support >= config.min_pose_support else None
-
-
-def _relative_pose(X: np.ndarray, uv: np.ndarray, K: np.ndarray, T_init: np.ndarray | None,
-                   config: CullingConfig, segmented: bool) -> tuple[np.ndarray, np.ndarray] | None:
-    """(rvec, tvec) of the current camera from previous-frame points X (N,3) m seen at uv (N,2) px: the
-    predicted pose refined (`_refine_from`) when there is one and most points agree with it, else PnP-RANSAC's
-    when enough agree with that (`min_pose_support`); None: no depth test for this frame."""
-    if T_init is not None:
-        pose = _refine_from(X, uv, K, T_init, config)
-        if pose is not None:
-            return pose
-    got = sqpnp_ransac(X, uv, K, config.pnp_px, 300, 6, config.usac, segmented and config.ap3p_samples)
-    if got is None or (segmented and len(got[2]) < config.min_pose_support * len(X)):
-        return None
-    return got[0], got[1]
-
-
-def _scores(p_prev, p_cur, static, prev_depth, K, config, T_init=None, segmented=False,
-            pred_init=None) -> np.ndarray | None:
-    """Motion score (N,) in epipolar pixels; inf-free, 0 where nothing could be measured. None when `segmented`,
-    without a confirmed prediction (`T_init`), the depth test finds no pose (see `min_pose_support`).
-    `pred_init` (N, 2) px: where `T_init` puts the matches' previous keypoints (guided matching computed it)."""
-    depth_test = config.use_depth and prev_depth is not None and K is not None
-    pose = None
-    if depth_test:
-        h, w = prev_depth.shape
-        z = prev_depth[_pixel(p_prev[:, 1], h), _pixel(p_prev[:, 0], w)]
-        has = z > 0
-        X = backproject(p_prev, z, K)  # (N, 3) previous-camera points; meaningful where `has`
-        usable = _spread(np.flatnonzero(has & static), config.fit_max_points)
-        if len(usable) >= 6:
-            pose = _relative_pose(X[usable], p_cur[usable].astype(np.float64), K, T_init, config, segmented)
-        if pose is None and segmented and T_init is None:
-            return None
-    F = _fundamental(p_prev[static], p_cur[static], pose, K, config)
-    predicted = config.prediction_veto and T_init is not None and prev_depth is not None and K is not None
-    if F is None and not predicted:
-        return np.zeros(len(p_prev))
-    # Without F (fewer than 8 matches outside the segments) a confirmed prediction alone scores the points.
-    score = epipolar_distance(F, p_prev, p_cur) if F is not None else np.full(len(p_prev), np.inf)
-    if depth_test:
-        if pose is not None:
-            err = reprojection_px(X[has], p_cur[has], K, *pose)
-            score[has] = np.maximum(score[has], err / config.reprojection_scale)
-        if config.prediction_veto and T_init is not None and has.any():
-            # refined only where segments hold nearly all matches (see `refine_prediction_below`)
-            refine = static.mean() < config.refine_prediction_below
-            T_veto = _veto_pose(X, p_cur, has, K, T_init, config) if refine else T_init
-            pred = pred_init[has] if T_veto is T_init and pred_init is not None else \
-                predict_positions(p_prev[has], z[has], T_veto, K)
-            score[has] = np.fmin(score[has], np.linalg.norm(pred - p_cur[has], axis=1))  # NaN (behind) = no veto
-    score[np.isinf(score)] = 0.0  # not measurable
-    return score
-
-
-def _fundamental(p_prev, p_cur, pose, K, config) -> np.ndarray | None:
-    """F (3x3) of the static matches (N, 2) px: seeded by the depth test's pose (rvec, tvec) when there is one
-    (see `seed_fundamental`), else by RANSAC; None with fewer than 8 matches."""
-    if pose is not None and K is not None and config.seed_fundamental < 1.0:
-        seed = fundamental_of_pose(cv2.Rodrigues(pose[0])[0], pose[1], K)
-        F = fundamental_from_seed(p_prev, p_cur, seed, config.ransac_px, config.seed_fundamental)
-        if F is not None:
-            return F
-    return fundamental_ransac(p_prev, p_cur, config.ransac_px, usac=config.usac)
-
-
-def _veto_pose(X, p_cur, has, K, T_init, config) -> np.ndarray:
-    """4x4 T_cur_prev for the prediction veto: the prediction refined on the matched points X (N,3) m that have
-    depth (`has`) and are seen at p_cur (N,2) px (the static majority pulls it onto the scene's motion; see
-    `refine_prediction_below`), or the prediction itself."""
-    idx = _spread(np.flatnonzero(has), config.fit_max_points)
-    if len(idx) < 6:
-        return T_init
-    # tight gates: movers within a wide first gate pull the pose along with the scene
-    pose = _refine_from(X[idx], p_cur[idx].astype(np.float64), K, T_init, config, gates=(3.0, 1.0))
-    if pose is None:
-        return T_init
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = cv2.Rodrigues(pose[0])[0], pose[1].ravel()
-    return T
-
-
-def _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr_label, config) -> np.ndarray:
-    """`dynamic` (H, W) with the static-looking parts of large dynamic segments kept (see `local_px`);
-    `thr_label` (L+1,) is each segment's Δd."""
-    h, w = labels.shape
-    s = config.local_step_px
-    gy, gx = np.mgrid[s // 2:h:s, s // 2:w:s]  # a coarse pixel grid, decided then spread to its cells
-    grid_labels = labels[gy, gx]
-    # a segment's area from the grid (one sample per s x s cell): no pass over the full image per frame
-    area = np.bincount(grid_labels.ravel(), minlength=len(moving_label)) * s * s
-    large = np.flatnonzero((area >= config.local_min_area * h * w) & moving_label)
-    large = large[large > 0]
-    if not len(large):
-        return dynamic
-    out = dynamic.copy()
-    for lab in large:
-        on = point_label == lab
-        if on.sum() < config.local_k:
-            continue
-        cell = grid_labels == lab
-        q = np.stack([gx[cell], gy[cell]], 1)
-        # cells as wide as the radius: a query scans 3x3 of them (a segment's few dozen points are sparse)
-        idx = PointGrid.of(np.stack([xi[on], yi[on]], 1), config.local_px).nearest(q, config.local_px, config.local_k)
-        near = idx[:, -1] >= 0  # all k within local_px
-        # only towards "static": a few bad matches among a moving object's points must not keep it, but k
-        # nearby points that all agree with the static scene are not on it (one-way: a small moving part of a
-        # segment judged static is not looked for; k points are a weaker test than the whole segment's)
-        keep = np.zeros(len(q), bool)
-        keep[near] = np.median(scores[on][idx[near]], axis=1) <= thr_label[lab]
-        if not keep.any():
-            continue
-        flag = np.zeros(cell.shape, bool)
-        flag[cell] = keep
-        # spread the kept cells to their s x s pixels, within the cells' bounding box only
-        rows, cols = np.flatnonzero(flag.any(1)), np.flatnonzero(flag.any(0))
-        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
-        block = np.repeat(np.repeat(flag[r0:r1, c0:c1], s, 0), s, 1)
-        y0, x0 = r0 * s, c0 * s
-        y1, x1 = min(r1 * s, h), min(c1 * s, w)
-        window = out[y0:y1, x0:x1]
-        window[(labels[y0:y1, x0:x1] == lab) & block[:y1 - y0, :x1 - x0]] = False
-    return out
-
-
-def dilate_disc(mask: np.ndarray, px: int) -> np.ndarray:
-    """`mask` (H, W) bool grown by a disc of radius `px`, computed only around its bounding box."""
-    out = np.zeros_like(mask, dtype=bool)
-    x, y, w, h = cv2.boundingRect(mask.astype(np.uint8))
-    if w == 0 or px <= 0:
-        return mask.copy()
-    H, W = mask.shape
-    y0, y1, x0, x1 = max(y - px, 0), min(y + h + px, H), max(x - px, 0), min(x + w + px, W)
-    k = 2 * px + 1
-    out[y0:y1, x0:x1] = cv2.dilate(mask[y0:y1, x0:x1].astype(np.uint8),
-                                   cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
-    return out
-
-
-def _spread(idx: np.ndarray, n: int) -> np.ndarray:
-    """At most `n` of `idx`, evenly spaced (deterministic, and spread over the keypoint order)."""
-    return idx if len(idx) <= n else idx[np.linspace(0, len(idx) - 1, n).astype(int)]
-
-
-def _geometric_clusters(p_cur, moving, depth, covered, config) -> list[np.ndarray]:
-    """Regions (bool masks) around clusters of moving points with consistent depth, outside `covered`."""
-    h, w = depth.shape
-    c = config.cluster_cell
-    gh, gw = (h + c - 1) // c, (w + c - 1) // c
-    cell = (np.clip(p_cur[:, 1] // c, 0, gh - 1).astype(int), np.clip(p_cur[:, 0] // c, 0, gw - 1).astype(int))
-    grid = np.zeros((gh, gw), np.uint8)
-    sel = moving & ~covered
-    grid[cell[0][sel], cell[1][sel]] = 1
-    n, lab = cv2.connectedComponents(cv2.dilate(grid, np.ones((3, 3), np.uint8)), connectivity=8)
-    regions = []
-    point_lab = lab[cell]
-    for k in range(1, n):
-        in_k = point_lab == k
-        mov_k = in_k & sel
-        if mov_k.sum() < config.cluster_min_points or mov_k.sum() < 0.5 * in_k.sum():
-            continue  # a few outliers among many static points: noise, not an object
-        xi = np.clip(np.round(p_cur[mov_k, 0]).astype(int), 0, w - 1)
-        yi = np.clip(np.round(p_cur[mov_k, 1]).astype(int), 0, h - 1)
-        zs = depth[yi, xi]
-        zs = zs[zs > 0]
-        ys, xs = np.nonzero(cv2.resize((lab == k).astype(np.uint8), (gw * c, gh * c),
-                                       interpolation=cv2.INTER_NEAREST)[:h, :w])
-        region = np.zeros((h, w), bool)
-        region[ys, xs] = True
-        if len(zs):
-            zmed = float(np.median(zs))
-            region &= np.abs(depth - zmed) < config.cluster_depth_tol * zmed
-        regions.append(region)
-    return regions
 
 
 def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, desc_cur: np.ndarray,
                depth_cur: np.ndarray, potentially_dynamic: np.ndarray | None, pose_cov: np.ndarray | None,
                config: CullingConfig = CullingConfig(), prev_depth: np.ndarray | None = None,
                K: np.ndarray | None = None, T_cur_prev: np.ndarray | None = None) -> CullingResult:
-    """Judge the objects of the current frame.
+    """Judge the objects of the current frame (`cull_pair` of the `FramePair` of these arrays).
 
     `kp_*` (N, 2) pixel coordinates (x, y) with ORB `desc_*` (N, 32) uint8; `depth_cur` float32 m (H, W);
     `potentially_dynamic` bool (H, W) from segmentation (None in geometry-only mode); `pose_cov` the 6x6
@@ -435,90 +229,52 @@ def cull_frame(kp_prev: np.ndarray, desc_prev: np.ndarray, kp_cur: np.ndarray, d
     `T_cur_prev` (4x4, X_cur = T X_prev), the predicted relative pose, enables guided matching. With
     segmentation that leaves no segment, nothing is matched (`CullingResult.without_objects`).
     """
-    h, w = depth_cur.shape
-    entropy = motion_entropy(pose_cov)
+    return cull_pair(FramePair(kp_prev, desc_prev, kp_cur, desc_cur, depth_cur, potentially_dynamic, pose_cov,
+                               prev_depth, K, T_cur_prev), config)
+
+
+def cull_pair(pair: FramePair, config: CullingConfig = CullingConfig()) -> CullingResult:
+    """Judge the objects of `pair`'s current frame: split the marks into segments, match, score the matches,
+    decide per segment (and per moving cluster outside them), exclude the dynamic pixels with a band."""
+    h, w = pair.shape
+    entropy = motion_entropy(pair.pose_cov)
     thr = adaptive_threshold(entropy, config.threshold)
-    use_sem = config.use_segmentation and potentially_dynamic is not None
-    labels = split_segments(potentially_dynamic, depth_cur, config.min_segment_area, config.depth_jump,
-                            config.segment_step) \
-        if use_sem and potentially_dynamic is not None else np.zeros((h, w), np.int32)
+    marked = pair.potentially_dynamic
+    use_sem = config.use_segmentation and marked is not None
+    labels = split_segments(marked, pair.cur_depth, config.min_segment_area, config.depth_jump, config.segment_step) \
+        if use_sem and marked is not None else np.zeros((h, w), np.int32)
     if use_sem and not config.detect_unknown and not labels.any():
         empty = np.zeros((h, w), bool)
         return CullingResult(empty, empty, [], thr, entropy, 0, np.zeros(0), np.zeros((0, 2)), without_objects=True)
-    if config.judge_marks_above > 0 and use_sem and potentially_dynamic is not None and not config.detect_unknown \
-            and potentially_dynamic.mean() <= config.judge_marks_above:  # off (0): no pass over the mask
+    if config.judge_marks_above > 0 and use_sem and marked is not None and not config.detect_unknown \
+            and marked.mean() <= config.judge_marks_above:  # off (0): no pass over the mask
         return _trusted_marks(labels, thr, entropy, config)
     # Keypoints on objects are matched exhaustively (a search radius would keep only their small motions and
     # bias the decision towards "static"); the static rest, when a pose is predicted, by the guided search.
-    on_object = labels[_pixel(kp_cur[:, 1], h), _pixel(kp_cur[:, 0], w)] > 0 if use_sem else None
-    m = _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur_prev, config)
-    p_prev, p_cur = kp_prev[m.prev_idx].astype(np.float64), kp_cur[m.cur_idx].astype(np.float64)
-    xi, yi = _pixel(p_cur[:, 0], w), _pixel(p_cur[:, 1], h)
-    point_label = labels[yi, xi]
+    on_object = labels[nearest_pixel(pair.cur_uv[:, 1], h), nearest_pixel(pair.cur_uv[:, 0], w)] > 0 \
+        if use_sem else None
+    m = match_frames(pair, on_object, config)
+    pts = MatchedPoints.of(pair, m)
+    seg = Segments(labels, pts.labels_at(labels), int(labels.max()))
     # Refining the predicted pose needs a clean static set; without segments moving points are in it, and a
     # wide first gate would let them pull the pose along (RANSAC instead).
-    T_init = T_cur_prev if m.guided and use_sem else None
+    T_init = pair.T_cur_prev if m.guided and use_sem else None
     pred = m.pred[m.prev_idx] if m.pred is not None and T_init is not None else None
-    scores = _scores(p_prev, p_cur, point_label == 0, prev_depth, K, config, T_init, use_sem, pred) \
-        if len(p_prev) >= 8 else np.zeros(len(p_prev))
+    scores = score_matches(pair, pts, seg.point_label == 0, config, T_init, use_sem, pred) \
+        if len(pts) >= 8 else np.zeros(len(pts))
     judged = scores is not None  # False: no segment can be judged (see `min_pose_support`)
     if scores is None:
-        scores = np.zeros(len(p_prev))
-    decisions = []
-    n_labels = int(labels.max())
-    moving_label = np.zeros(n_labels + 1, bool)
-    thr_label = np.full(n_labels + 1, thr)
-    object_level = config.threshold.mode == "object" and prev_depth is not None and K is not None
-    z_prev = prev_depth[_pixel(p_prev[:, 1], prev_depth.shape[0]), _pixel(p_prev[:, 0], prev_depth.shape[1])] \
-        if object_level and prev_depth is not None else None
-    # each segment's scores, ascending: one sort for all segments instead of a mask and a quantile per segment
-    order = np.lexsort((scores, point_label))
-    sorted_scores = scores[order]
-    starts = np.concatenate([[0], np.cumsum(np.bincount(point_label, minlength=n_labels + 1))])
-    for lab in range(1, n_labels + 1):
-        s = sorted_scores[starts[lab]:starts[lab + 1]]
-        by_object = False
-        if z_prev is not None and K is not None:
-            on = point_label == lab
-            sel = on & (z_prev > 0)
-            motion = estimate_object_motion(backproject(p_prev[sel], z_prev[sel], K), p_cur[sel], K, T_cur_prev,
-                                            config.object_motion)
-            if motion is not None:
-                thr_label[lab] = object_threshold(motion.cov, config.threshold)[0]
-                by_object = True
-        if len(s) < config.min_points or not judged:
-            moving = config.undecided_dynamic
-        else:
-            moving = quantile_of_sorted(s, config.segment_quantile) > thr_label[lab]
-        decisions.append(SegmentDecision(lab, "semantic", len(s), median_of_sorted(s) if len(s) else 0.0, moving,
-                                         float(thr_label[lab]), by_object))
-        moving_label[lab] = moving
-    if config.grow_px > 0 and moving_label.any():
-        # the grown pixels join their segment, so the local decisions below judge them with its points
-        labels = labels.copy()
-        for grow_lab in np.flatnonzero(moving_label):
-            grown = grow_by_depth(labels == grow_lab, depth_cur, config.grow_px, config.grow_rel_depth,
-                                  config.depth_jump)
-            labels[grown & (labels == 0)] = grow_lab
-        point_label = labels[yi, xi]
-    # one pass over the image for all segments (none when nothing moves)
-    dynamic = pixels_of(labels, moving_label) if moving_label.any() else np.zeros((h, w), bool)
-    if config.local_px > 0 and n_labels and judged:
-        dynamic = _local_decisions(labels, dynamic, moving_label, point_label, xi, yi, scores, thr_label, config)
+        scores = np.zeros(len(pts))
+    decisions, verdicts = judge_segments(pair, pts, seg, scores, thr, judged, config)
+    seg = grow_segments(seg, verdicts, pair.cur_depth, pts, config)
+    dynamic = dynamic_pixels(seg, verdicts, pts, scores, judged, config)
     exclude = dilate_disc(dynamic, config.dilation_px)
     if config.detect_unknown or not use_sem:
-        moving_pts = scores > thr
-        clusters = np.zeros_like(dynamic)
-        for k, region in enumerate(_geometric_clusters(p_cur, moving_pts, depth_cur, point_label > 0,
-                                                       config)):
-            inside = region[yi, xi]
-            decisions.append(SegmentDecision(-(k + 1), "geometric", int(inside.sum()),
-                                             float(np.median(scores[inside])) if inside.any() else 0.0, True,
-                                             thr))
-            clusters |= region
+        found, clusters = geometric_regions(pts, scores, thr, pair.cur_depth, seg.point_label > 0, config)
+        decisions += found
         dynamic |= clusters
         exclude |= dilate_disc(clusters, config.cluster_dilation_px)
-    return CullingResult(dynamic, exclude, decisions, thr, entropy, len(p_prev), scores, p_cur, m.guided, judged)
+    return CullingResult(dynamic, exclude, decisions, thr, entropy, len(pts), scores, pts.cur, m.guided, judged)
 
 
 def _trusted_marks(labels: np.ndarray, thr: float, entropy: float | None, config: CullingConfig) -> CullingResult:
@@ -527,90 +283,3 @@ def _trusted_marks(labels: np.ndarray, thr: float, entropy: float | None, config
     decisions = [SegmentDecision(lab, "semantic", 0, 0.0, True, thr) for lab in range(1, int(labels.max()) + 1)]
     return CullingResult(dynamic, dilate_disc(dynamic, config.dilation_px), decisions, thr, entropy, 0, np.zeros(0),
                          np.zeros((0, 2)), marks_trusted=True)
-
-
-@dataclass(frozen=True)
-class _FrameMatches(Matches):
-    guided: bool = False
-    pred: np.ndarray | None = None
-    """(N_prev, 2) px: every previous keypoint where the predicted pose puts it (guided matching only)."""
-
-
-def _pixel(coord: np.ndarray, size: int) -> np.ndarray:
-    return np.clip(np.round(coord).astype(int), 0, size - 1)
-
-
-def _near_box(pred: np.ndarray, pts: np.ndarray, margin: float) -> np.ndarray:
-    """Indices of predicted positions (N,2) within `margin` px of the bounding box of `pts` (M,2)."""
-    if len(pts) == 0:
-        return np.zeros(0, int)
-    lo, hi = pts.min(0) - margin, pts.max(0) + margin
-    with np.errstate(invalid="ignore"):
-        return np.flatnonzero(((pred >= lo) & (pred <= hi)).all(1))
-
-
-def _match(kp_prev, desc_prev, kp_cur, desc_cur, on_object, prev_depth, K, T_cur_prev, config) -> _FrameMatches:
-    """Guided matching when a relative pose is predicted and enough guided matches are found, else brute force.
-
-    With segments (`on_object` (M,) bool), the current keypoints on objects are brute-forced against the
-    previous keypoints predicted near them (giving way to a nearly as good guided match, `prefer_static_within`)
-    and the rest are guided. Without (`on_object` None, geometry-only) everything is guided first, then what is
-    left on both sides is brute-forced: the moving points a search radius misses are exactly what the geometric
-    path looks for."""
-    guided = np.flatnonzero(~on_object) if on_object is not None else np.arange(len(kp_cur))
-    if T_cur_prev is not None and K is not None and prev_depth is not None and len(kp_prev) and len(kp_cur):
-        h, w = prev_depth.shape
-        z = prev_depth[_pixel(kp_prev[:, 1], h), _pixel(kp_prev[:, 0], w)]
-        uv_prev = kp_prev.astype(np.float64)
-        pred = predict_positions(uv_prev, z, T_cur_prev, K)  # (N, 2) px, once for every search below
-
-        def search(cur: np.ndarray, prev: np.ndarray | None = None) -> Matches:
-            """Guided matches of the current keypoints `cur` among the previous ones `prev` (None = all)."""
-            sel = np.s_[:] if prev is None else prev  # all: views, no copies
-            index = KeypointIndex.of_points(kp_cur[cur], desc_cur[cur], grid=True)
-            m = match_guided(uv_prev[sel], z[sel], desc_prev[sel], index,
-                             T_cur_prev, K, config.guided_radius_px, config.match_max_distance, pred=pred[sel])
-            return m if prev is None else Matches(prev[m.prev_idx], m.cur_idx)
-
-        g = search(guided)
-        confirmed = len(g.prev_idx) >= config.guided_min_matches
-        if not confirmed and on_object is not None and config.confirm_on_objects:
-            # Segments covering most of the view leave too few keypoints outside them to confirm the
-            # prediction; the static scene under a wrong mask confirms it as well as the scene outside.
-            confirmed = len(search(np.arange(len(kp_cur))).prev_idx) >= config.guided_min_matches
-        if confirmed:
-            g_cur = guided[g.cur_idx]
-            if on_object is not None:
-                rest_cur = np.flatnonzero(on_object)
-                rest_prev = _near_box(pred, kp_cur[rest_cur], config.object_margin_px)
-            else:
-                rest_cur = np.setdiff1d(np.arange(len(kp_cur)), g_cur)
-                rest_prev = np.setdiff1d(np.arange(len(kp_prev)), g.prev_idx)
-            b = match_orb(desc_prev[rest_prev], desc_cur[rest_cur], config.match_max_distance)
-            b_prev, b_cur = rest_prev[b.prev_idx], rest_cur[b.cur_idx]
-            if on_object is not None and config.prefer_static_within >= 0 and len(b_cur):
-                # only previous keypoints that can land within the search radius (doubled without depth)
-                reach = _near_box(pred, kp_cur[b_cur], 2 * config.guided_radius_px)
-                b_prev, b_cur = _prefer_static(b_prev, b_cur, search(b_cur, reach), desc_prev, desc_cur,
-                                               config.prefer_static_within)
-            free = ~np.isin(b_prev, g.prev_idx)  # a previous keypoint matched twice keeps its guided match
-            return _FrameMatches(np.concatenate([g.prev_idx, b_prev[free]]),
-                                 np.concatenate([g_cur, b_cur[free]]), True, pred)
-    m = match_orb(desc_prev, desc_cur, config.match_max_distance)
-    return _FrameMatches(m.prev_idx, m.cur_idx, False)
-
-
-def _prefer_static(b_prev: np.ndarray, b_cur: np.ndarray, near: Matches, desc_prev: np.ndarray,
-                   desc_cur: np.ndarray, within: int) -> tuple[np.ndarray, np.ndarray]:
-    """Brute-force matches (b_prev, b_cur) (K,) with a current keypoint's previous one replaced by its guided
-    match (`near`: indices into `b_cur` and into the previous keypoints) where that one's Hamming distance
-    exceeds the brute-force one's by at most `within` (see `prefer_static_within`). A previous keypoint
-    claimed twice stays with the first of its current keypoints."""
-    pos = near.cur_idx
-    d_brute = hamming(desc_prev[b_prev[pos]], desc_cur[b_cur[pos]])
-    d_near = hamming(desc_prev[near.prev_idx], desc_cur[b_cur[pos]])
-    swap = d_near <= d_brute + within
-    b_prev = b_prev.copy()
-    b_prev[pos[swap]] = near.prev_idx[swap]
-    first = np.sort(np.unique(b_prev, return_index=True)[1])
-    return b_prev[first], b_cur[first]
