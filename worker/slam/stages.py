@@ -28,7 +28,8 @@ from worker.slam.truth import Truth
 
 @dataclass
 class FrameInputs:
-    """What the stages built for one frame (all optional; images are the frame's H,W)."""
+    """What the stages built for one frame (all optional; images are the frame's H,W). The fields are the
+    products a stage contract (`formats.catalog.STAGE_CONTRACTS`) says a stage needs, uses or provides."""
 
     exclude_mask: np.ndarray | None = None
     """bool (H,W): True = pixel must not give features nor enter the dense map."""
