@@ -37,6 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from worker.slam.camera import parse_camera  # noqa: E402
+from worker.slam.catalog import shipped_catalog  # noqa: E402
 from worker.slam.config import PipelineConfig  # noqa: E402
 from worker.slam.dynamic import stage as culling_stage  # noqa: E402
 from worker.slam.dynamic.culling import CullingConfig, CullingResult, cull_frame  # noqa: E402
@@ -45,8 +46,6 @@ from worker.slam.features.orb import OrbExtractor  # noqa: E402
 from worker.slam.geometry.se3 import inv  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.pipeline import run_pipeline  # noqa: E402
-from worker.slam.presets import get_preset  # noqa: E402
-from worker.slam.stages import build_stages  # noqa: E402
 from worker.slam.truth import load_truth  # noqa: E402
 
 
@@ -109,8 +108,9 @@ def main() -> None:
 def _in_pipeline(root: Path, camera: str, preset: str, record: Path | None = None) -> None:
     """`cull_frame`'s wall time per frame in a run of `preset` on `root`, all stages on this thread; with
     `record`, every call's arguments and result saved there."""
-    seq, config = Sequence(root, parse_camera(camera)), get_preset(preset)
-    stages = build_stages(config, seq.camera)
+    catalog = shipped_catalog()
+    seq, config = Sequence(root, parse_camera(camera)), catalog.preset(preset)
+    stages = catalog.build_stages(config, seq.camera)
     calls: list[tuple[tuple, dict, CullingResult]] = []
 
     def recorded(*a, **k) -> CullingResult:

@@ -15,10 +15,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from worker.slam.camera import parse_camera  # noqa: E402
-from worker.slam.dynamic.stage import CullingStage, SegmentationStage  # noqa: E402
+from worker.slam.dynamic.stage import CullingStage  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.pipeline import run_pipeline  # noqa: E402
 from worker.slam.presets import get_preset  # noqa: E402
+from worker.slam.segmentation.stage import SegmentationStage  # noqa: E402
 from worker.slam.truth import load_truth  # noqa: E402
 
 

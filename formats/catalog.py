@@ -1,13 +1,87 @@
-"""The names the api and the pipeline agree on: pipeline presets and camera presets, as plain data.
+"""The names the api and the pipeline agree on: pipeline presets, stage contracts and camera presets, as data.
 
-The api validates a job's preset and a sequence's camera against these names without importing the
-pipeline; the pipeline builds its `PipelineConfig`s (worker.slam.presets) and `Camera`s (worker.slam.camera)
-from the same entries, so there is one list to edit.
+The api validates a job's preset, its stage list and a sequence's camera against these without importing the
+pipeline; the pipeline builds its `PipelineConfig`s and stages (worker.slam.catalog) and `Camera`s
+(worker.slam.camera) from the same entries, so there is one list to edit.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+
+from formats.errors import FormatError
+
+
+@dataclass(frozen=True)
+class StageContract:
+    """What a per-frame stage reads from the stages before it and what it hands on, by product name (the
+    names of `worker.slam.stages.FrameInputs` fields)."""
+
+    name: str
+    needs: tuple[str, ...] = ()
+    """Products an earlier stage must provide: without them the stage cannot do its job."""
+    uses: tuple[str, ...] = ()
+    """Products the stage reads when an earlier stage provides them and does without otherwise."""
+    provides: tuple[str, ...] = ()
+
+
+STAGE_CONTRACTS: dict[str, StageContract] = {
+    c.name: c for c in (
+        StageContract("segmentation", provides=("potentially_dynamic",)),
+        # Extracts the frame's features itself; with segmentation's mask (and `culling.use_segmentation`,
+        # default on) it judges the marked objects, without one it judges geometric clusters alone.
+        StageContract("culling", uses=("potentially_dynamic",),
+                      provides=("features", "exclude_mask", "dynamic_mask", "held_back")),
+        # Fills the pixels judged moving from reference frames; matches them by the kept features' descriptors.
+        StageContract("restoration", needs=("dynamic_mask",), uses=("features",),
+                      provides=("restored_rgb", "restored_depth", "extra_features", "previews")),
+    )
+}
+"""The shipped stages, in the order they run when all are listed."""
+
+
+class StageOrderError(FormatError):
+    """A stage list the pipeline cannot run; ``detail`` says which stage and why (JSON-able)."""
+
+    def __init__(self, message: str, detail: dict[str, object]) -> None:
+        super().__init__(message)
+        self.detail = detail
+
+
+def check_stage_order(stages: Sequence[str], contracts: Mapping[str, StageContract] = STAGE_CONTRACTS) -> None:
+    """Refuse (StageOrderError) an unknown stage, one listed twice, one whose `needs` no earlier stage provides
+    (restoration alone), and one listed before a stage that provides what it needs or uses (culling after
+    restoration, or before segmentation: it would quietly run without the mask)."""
+    provided: set[str] = set()
+    for i, name in enumerate(stages):
+        if name not in contracts:
+            raise StageOrderError(f"unknown pipeline stage {name!r}; known: {', '.join(contracts)}",
+                                  {"stage": name, "allowed": list(contracts)})
+        if name in stages[:i]:
+            raise StageOrderError(f"pipeline stage {name!r} is listed twice", {"stage": name, "stages": list(stages)})
+        contract = contracts[name]
+        later = [s for s in stages[i + 1:] if s in contracts]
+        for product in (*contract.needs, *contract.uses):
+            late = [s for s in later if product in contracts[s].provides]
+            if product not in provided and (late or product in contract.needs):
+                verb = "needs" if product in contract.needs else "uses"
+                providers = late or [c.name for c in contracts.values() if product in c.provides]
+                where = f"{' and '.join(repr(s) for s in late)} provides only after it" if late \
+                    else "no earlier stage provides"
+                raise StageOrderError(
+                    f"pipeline stage {name!r} {verb} {product}, which {where}"
+                    + (f"; list {' or '.join(repr(p) for p in providers)} before {name!r}" if providers else ""),
+                    {"stage": name, verb: product, "providers": providers, "stages": list(stages)})
+        provided.update(contract.provides)
+
+
+def provided_before(stages: Sequence[str], name: str,
+                    contracts: Mapping[str, StageContract] = STAGE_CONTRACTS) -> frozenset[str]:
+    """The products the stages listed before `name` provide (all listed ones' when `name` is not listed;
+    names without a contract provide nothing)."""
+    before = stages[: list(stages).index(name)] if name in stages else stages
+    return frozenset(p for s in before if s in contracts for p in contracts[s].provides)
 
 
 @dataclass(frozen=True)
@@ -15,7 +89,7 @@ class PipelinePreset:
     name: str
     description: str
     stages: tuple[str, ...]
-    """Per-frame stages run before tracking, in order (names registered by worker.slam.presets)."""
+    """Per-frame stages run before tracking, in order (names of `STAGE_CONTRACTS`)."""
 
 
 PIPELINE_PRESETS: tuple[PipelinePreset, ...] = (

@@ -44,6 +44,20 @@ def check_preset(name: str) -> str:
     return name
 
 
+def check_stages(config: dict[str, Any]) -> None:
+    """A config's own ``stages`` list (when it gives one) must be one the pipeline can run: known stages, each
+    once, each after the stages that provide what it needs (:func:`formats.catalog.check_stage_order`)."""
+    if "stages" not in config:
+        return
+    stages = config["stages"]
+    if not isinstance(stages, list) or not all(isinstance(s, str) for s in stages):
+        raise InvalidInput("config stages must be a list of stage names", {"allowed": list(catalog.STAGE_CONTRACTS)})
+    try:
+        catalog.check_stage_order(stages)
+    except catalog.StageOrderError as exc:
+        raise InvalidInput(exc.message, exc.detail) from exc
+
+
 def parse_camera_spec(spec: str | dict[str, Any]) -> dict[str, Any]:
     """A camera preset name or explicit intrinsics (a JSON object or dict), checked and normalised.
 

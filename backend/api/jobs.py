@@ -16,7 +16,7 @@ from backend.api.schemas import JobCreate, JobId, JobOut, Page
 from storage.config_ranges import check_ranges
 from storage.errors import InvalidInput
 from storage.models import JobStatus
-from storage.presets import check_preset
+from storage.presets import check_preset, check_stages
 from storage.repositories import jobs
 from storage.repositories.metrics import json_safe
 
@@ -46,13 +46,14 @@ def enqueue_or_fail(session: Session, enqueue: Enqueue, job_ids: list[str]) -> N
 
 
 def check_config(config: dict[str, Any] | None) -> dict[str, Any] | None:
-    """Size and the core settings' valid ranges (422 naming the field and range); the worker checks
-    everything again, including stage sections."""
+    """Size, the core settings' valid ranges (422 naming the field and range) and the order of a given
+    ``stages`` list; the worker checks everything again, including stage sections."""
     if config is None:
         return None
     if len(json.dumps(json_safe(config))) > MAX_CONFIG_CHARS:
         raise InvalidInput(f"config overrides are limited to {MAX_CONFIG_CHARS} characters")
     check_ranges(config)
+    check_stages(config)
     return config
 
 

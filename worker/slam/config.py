@@ -1,15 +1,16 @@
 """Pipeline configuration: one typed dataclass per core section, composed into `PipelineConfig`.
 
 A job stores `PipelineConfig.to_dict()`; `PipelineConfig.from_dict()` rebuilds it (unknown keys are errors).
-Stages plug their own sections in without editing this file: `register_section(name, cls)` adds a dataclass
-that `from_dict`/`to_dict` understand (`worker.slam.presets` registers the shipped stages' sections, and the
-named presets live there too).
+Stages plug their own sections in without editing this file: a config carries them in `extra` (a catalog,
+`worker.slam.catalog`, builds configs that hold every shipped stage's section), and `from_dict`/`to_dict`
+understand the sections the config carries.
 """
 from __future__ import annotations
 
 import copy
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -228,16 +229,14 @@ class EvalConfig:
 
 
 _CORE = ("features", "tracking", "mapping", "loop", "dense", "eval")
-_SECTIONS: dict[str, type] = {}
 
 
-def register_section(name: str, cls: type) -> None:
-    """Make an extra stage config (a dataclass with defaults) part of every PipelineConfig snapshot."""
+def check_section(name: str, cls: type) -> None:
+    """An extra stage config must be a dataclass with defaults, under a name no core part uses."""
     if name in _CORE or name in ("name", "stages"):
         raise ConfigError(f"config section name {name!r} is reserved")
     if not dataclasses.is_dataclass(cls):
         raise ConfigError(f"config section {name!r} must be a dataclass")
-    _SECTIONS[name] = cls
 
 
 @dataclass
@@ -245,7 +244,7 @@ class PipelineConfig:
     name: str = "custom"
     """Preset this config was built from (informational)."""
     stages: list[str] = field(default_factory=list)
-    """Ordered per-frame stages run before tracking (names registered with `worker.slam.stages.register_stage`)."""
+    """Ordered per-frame stages run before tracking (names of a catalog's stages, `worker.slam.catalog`)."""
     features: FeatureConfig = field(default_factory=FeatureConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     mapping: MappingConfig = field(default_factory=MappingConfig)
@@ -253,27 +252,37 @@ class PipelineConfig:
     dense: DenseConfig = field(default_factory=DenseConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     extra: dict[str, Any] = field(default_factory=dict)
-    """Registered extra sections by name (instances of their dataclasses)."""
+    """The stages' sections this config knows, by name, in snapshot order (instances of their dataclasses;
+    `with_sections` or a catalog's `base_config()` fills them with defaults)."""
+
+    @classmethod
+    def with_sections(cls, sections: Mapping[str, type]) -> PipelineConfig:
+        """Defaults, plus the extra `sections` (name -> dataclass with defaults) in their order: the order of
+        a snapshot's keys after the core ones."""
+        for name, section_cls in sections.items():
+            check_section(name, section_cls)
+        return cls(extra={name: section_cls() for name, section_cls in sections.items()})
 
     def section(self, name: str) -> Any:
-        """A core or registered extra section; extra ones default to their dataclass defaults."""
+        """A core section or one of the extra sections this config carries."""
         if name in _CORE:
             return getattr(self, name)
-        if name not in _SECTIONS:
+        if name not in self.extra:
             raise ConfigError(f"unknown config section {name!r}")
-        return self.extra.setdefault(name, _SECTIONS[name]())
+        return self.extra[name]
 
     def to_dict(self) -> dict:
         out: dict[str, Any] = {"name": self.name, "stages": list(self.stages)}
         for sec in _CORE:
             out[sec] = dataclasses.asdict(getattr(self, sec))
-        for sec in _SECTIONS:  # every registered section, so a job's snapshot is complete
-            out[sec] = dataclasses.asdict(self.section(sec))
+        for sec, value in self.extra.items():  # every section the config carries, so a job's snapshot is complete
+            out[sec] = dataclasses.asdict(value)
         return out
 
     @classmethod
     def from_dict(cls, d: dict, base: PipelineConfig | None = None) -> PipelineConfig:
-        """Build from a (possibly partial) snapshot; missing values come from `base` (default: defaults)."""
+        """Build from a (possibly partial) snapshot; missing values come from `base` (default: the core defaults
+        alone, so a snapshot with stage sections needs a base that carries them: `Catalog.config_from_dict`)."""
         cfg = copy.deepcopy(base) if base is not None else cls()
         return cfg.with_overrides(d)
 
@@ -287,7 +296,7 @@ class PipelineConfig:
                 if not isinstance(val, (list, tuple)) or not all(isinstance(s, str) for s in val):
                     raise ConfigError("stages must be a list of stage names")
                 cfg.stages = list(val)
-            elif key in _CORE or key in _SECTIONS:
+            elif key in _CORE or key in cfg.extra:
                 if not isinstance(val, dict):
                     raise ConfigError(f"config section {key!r} must be an object")
                 target = cfg.section(key)
@@ -297,7 +306,7 @@ class PipelineConfig:
                 else:
                     cfg.extra[key] = updated
             else:
-                raise ConfigError(f"unknown config section {key!r}; known: {sorted(_CORE + tuple(_SECTIONS))}")
+                raise ConfigError(f"unknown config section {key!r}; known: {sorted(_CORE + tuple(cfg.extra))}")
         return cfg
 
 

@@ -34,11 +34,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-import worker.slam.presets  # noqa: F401 - registers the shipped stages and their config sections
 from formats import artifacts
 from formats.frame_stats import write_frame_stats
 from formats.ply import write_ply
 from formats.run_metrics import RunMetrics, write_run_metrics
+from worker.slam.catalog import shipped_catalog
 from worker.slam.config import PipelineConfig
 from worker.slam.errors import ConfigError, EvaluationError, SlamError
 from worker.slam.geometry.se3 import inv, orthonormalize
@@ -53,7 +53,7 @@ from worker.slam.mapping.dense_map import build_dense_map
 from worker.slam.mapping.frame_refit import FrameMatchLog, refit_poses
 from worker.slam.mapping.local_mapping import LocalMapper
 from worker.slam.mapping.loop_closure import LoopCloser
-from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPose, build_stages
+from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPose
 from worker.slam.tracking.result import TrackResult
 from worker.slam.tracking.tracker import Tracker
 from worker.slam.truth import load_truth
@@ -121,7 +121,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     total = stop - start
     first = sequence[start]  # also fixes the camera size (Sequence rescales it on first read)
     camera = sequence.camera
-    stages = build_stages(config, camera) if stages is None else stages
+    stages = shipped_catalog().build_stages(config, camera) if stages is None else stages
     tracker = Tracker(camera, config)
     smap = tracker.map
     mapper = LocalMapper(smap, config.mapping, camera.K, tracker.bf, tracker.extractor.inv_sigma2,

@@ -13,8 +13,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from worker.slam.config import PipelineConfig
-from worker.slam.presets import preset_names  # noqa: F401 - registers the shipped stages' sections
+from worker.slam.catalog import shipped_catalog
 
 RANGES_FILE = Path(__file__).resolve().parents[2] / "formats" / "settings_ranges.json"
 
@@ -23,7 +22,7 @@ def settings_ranges() -> dict[str, dict[str, Any]]:
     """Every setting of every section (core and the shipped stages'), nested ones dotted, in declaration
     order: ``{"features.n_levels": {"type": "int", "default": 8, "min": 1, "max": 16}, "dense.enabled":
     {"type": "bool", "default": true}, ...}``; ``min``/``max`` where the field declares a range."""
-    cfg = PipelineConfig()
+    cfg = shipped_catalog().base_config()
     out: dict[str, dict[str, Any]] = {}
     for name in cfg.to_dict():
         value = getattr(cfg, name, None) if name in ("name", "stages") else cfg.section(name)

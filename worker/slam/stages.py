@@ -1,4 +1,5 @@
-"""The per-frame stage contract: what a stage gets, what it returns, and the registry that builds stages by name.
+"""The per-frame stage contract: what a stage gets and what it returns (a catalog, `worker.slam.catalog`, builds
+stages by name; `formats.catalog.STAGE_CONTRACTS` says which `FrameInputs` fields each reads and fills).
 
 A stage (segmentation, dynamic culling, restoration) runs before tracking. It gets the frame, the `FrameInputs`
 built so far and a `StageContext` -- a narrow, read-only view of the run (camera, config, predicted and last
@@ -19,7 +20,6 @@ import numpy as np
 
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig
-from worker.slam.errors import ConfigError
 from worker.slam.features.types import Features
 from worker.slam.io.sequence import Frame, Sequence
 from worker.slam.tracking.inputs import TrackInputs
@@ -28,7 +28,8 @@ from worker.slam.truth import Truth
 
 @dataclass
 class FrameInputs:
-    """What the stages built for one frame (all optional; images are the frame's H,W)."""
+    """What the stages built for one frame (all optional; images are the frame's H,W). The fields are the
+    products a stage contract (`formats.catalog.STAGE_CONTRACTS`) says a stage needs, uses or provides."""
 
     exclude_mask: np.ndarray | None = None
     """bool (H,W): True = pixel must not give features nor enter the dense map."""
@@ -113,19 +114,3 @@ class FrameStage(Protocol):
 StageFactory = Callable[[PipelineConfig, Camera], FrameStage]
 """Builds a stage for one run: `(config, camera) -> FrameStage`."""
 
-
-_STAGES: dict[str, StageFactory] = {}
-"""Stage factories by the name a config lists in `config.stages` (`worker.slam.presets` registers the shipped
-ones)."""
-
-
-def register_stage(name: str, factory: StageFactory) -> None:
-    _STAGES[name] = factory
-
-
-def build_stages(config: PipelineConfig, camera: Camera) -> list[FrameStage]:
-    """The stages `config.stages` names, in order; an unknown name is a ConfigError."""
-    missing = [s for s in config.stages if s not in _STAGES]
-    if missing:
-        raise ConfigError(f"unknown pipeline stages {missing}; registered: {sorted(_STAGES)}")
-    return [_STAGES[s](config, camera) for s in config.stages]

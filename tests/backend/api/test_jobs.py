@@ -5,6 +5,7 @@ import json
 
 import pytest
 
+from formats import catalog
 from storage.artifacts import ArtifactStore
 from storage.db import make_engine, make_session_factory
 from storage.models import JobStatus
@@ -100,6 +101,33 @@ def test_a_config_whose_ranges_contradict_each_other_is_422_naming_both(client, 
         assert err["code"] == "invalid_input" and all(f in err["message"] for f in fields), err
         assert err["detail"]["fields"] == list(fields)
     assert client.get("/api/v1/jobs").json()["total"] == 0 and queue.ids == []
+
+
+@pytest.mark.parametrize("stages, match", [
+    (["restoration"], "'restoration' needs dynamic_mask, which no earlier stage provides"),
+    (["segmentation", "restoration", "culling"], "'restoration' needs dynamic_mask, which 'culling' provides only"),
+    (["culling", "segmentation"], "'culling' uses potentially_dynamic, which 'segmentation' provides only after"),
+    (["culling", "culling"], "'culling' is listed twice"),
+    (["warp"], "unknown pipeline stage 'warp'"),
+    ("culling", "stages must be a list of stage names"),
+])
+def test_a_stage_order_the_pipeline_cannot_run_is_422(client, queue, seq_id, stages, match):
+    config = {"stages": stages}
+    for path, body in (("/api/v1/jobs", {"sequence_id": seq_id, "preset": "full", "config": config}),
+                       ("/api/v1/batches", {"sequence_ids": [seq_id], "presets": ["full"], "config": config})):
+        r = client.post(path, json=body)
+        assert r.status_code == 422, r.text
+        err = r.json()["error"]
+        assert err["code"] == "invalid_input" and match in err["message"] and err["detail"], err
+    assert client.get("/api/v1/jobs").json()["total"] == 0 and queue.ids == []
+
+
+def test_every_preset_stage_list_is_accepted(client, queue, seq_id):
+    for preset in catalog.PIPELINE_PRESETS:
+        r = client.post("/api/v1/jobs", json={"sequence_id": seq_id, "preset": "orb-only",
+                                              "config": {"stages": list(preset.stages)}})
+        assert r.status_code == 201, r.text
+    assert len(queue.ids) == len(catalog.PIPELINE_PRESETS) == 4
 
 
 def test_queue_down_is_503_and_the_job_is_failed_not_stuck(client, queue, seq_id):

@@ -1,21 +1,24 @@
 """The pipeline runner: outputs, metrics, config snapshot, stage hooks, progress and cancellation; real data."""
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 
+from formats.catalog import PipelinePreset, StageContract
 from formats.ply import read_ply
 from tests.worker.slam.synthetic_room import trajectory, write_sequence
 from worker.slam.camera import PRESETS
-from worker.slam.config import PipelineConfig, register_section
+from worker.slam.catalog import Catalog, CatalogStage, shipped_catalog
+from worker.slam.config import PipelineConfig
 from worker.slam.errors import ConfigError
 from worker.slam.io.sequence import Frame, Sequence
 from worker.slam.io.trajectory import read_tum_trajectory
 from worker.slam.pipeline import PipelineCancelled, run_pipeline
-from worker.slam.presets import get_preset, preset_names, register_preset
-from worker.slam.stages import FrameInputs, StageContext, register_stage
+from worker.slam.presets import get_preset, preset_names
+from worker.slam.stages import FrameInputs, StageContext
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +39,7 @@ def test_run_writes_all_outputs_and_tracks_to_subcentimetre(room_seq, tmp_path):
     assert len(read_tum_trajectory(tmp_path / "trajectory.txt")) == 40
     xyz, rgb = read_ply(tmp_path / "map.ply")
     assert len(xyz) == m["dense_points"] > 1000
-    cfg = PipelineConfig.from_dict(json.loads((tmp_path / "config.json").read_text()))
+    cfg = shipped_catalog().config_from_dict(json.loads((tmp_path / "config.json").read_text()))
     assert cfg.to_dict() == get_preset("orb-only").to_dict()
     assert calls[0] == (1, 40, "tracking") and calls[-1][2] == "writing"
     assert res.tracked.all()
@@ -76,23 +79,20 @@ class _MaskLeftHalf:
         return inputs
 
 
-@pytest.fixture
-def isolated_registries(monkeypatch):
-    """Registrations made by a test vanish after it (other tests compare the real registries)."""
-    import worker.slam.config as config_mod
-    import worker.slam.presets as presets_mod
-    import worker.slam.stages as stages_mod
-
-    monkeypatch.setattr(presets_mod, "_PRESETS", dict(presets_mod._PRESETS))
-    monkeypatch.setattr(config_mod, "_SECTIONS", dict(config_mod._SECTIONS))
-    monkeypatch.setattr(stages_mod, "_STAGES", dict(stages_mod._STAGES))
+def _catalog_with(**extra) -> Catalog:
+    """The shipped catalog plus a test's own sections, stages or presets (no shared state to undo)."""
+    base = shipped_catalog()
+    return dataclasses.replace(base, **{k: {**getattr(base, k), **v} for k, v in extra.items()})
 
 
-def test_registered_stage_and_preset_plug_in(room_seq, isolated_registries):
-    register_stage("mask_left", lambda cfg, cam: _MaskLeftHalf())
-    register_preset("test-masked", lambda: PipelineConfig(stages=["mask_left"]), "test only")
-    assert "test-masked" in preset_names()
-    res = run_pipeline(Sequence(room_seq), get_preset("test-masked", {"dense.stride": 8}), max_frames=12)
+def test_a_catalog_stage_and_preset_plug_in(room_seq):
+    contract = StageContract("mask_left", provides=("exclude_mask",))
+    catalog = _catalog_with(stages={"mask_left": CatalogStage(contract, lambda cfg, cam: _MaskLeftHalf())},
+                            presets={"test-masked": PipelinePreset("test-masked", "test only", ("mask_left",))})
+    assert "test-masked" in catalog.preset_names() and "test-masked" not in preset_names()
+    seq = Sequence(room_seq)
+    cfg = catalog.preset("test-masked", {"dense.stride": 8})
+    res = run_pipeline(seq, cfg, max_frames=12, stages=catalog.build_stages(cfg, seq.camera))
     assert res.metrics["tracked"] == 12 and "mask_left" in res.metrics["timings_ms"]
     assert res.metrics["stage_info"] == {"masked_px": 320 * 480}
     for kf in res.slam_map.keyframes:  # masked pixels stay out of features and the dense map
@@ -101,7 +101,7 @@ def test_registered_stage_and_preset_plug_in(room_seq, isolated_registries):
         run_pipeline(Sequence(room_seq), PipelineConfig(stages=["no-such-stage"]), max_frames=2)
 
 
-def test_config_snapshot_overrides_and_sections(isolated_registries):
+def test_config_snapshot_overrides_and_sections():
     from dataclasses import dataclass
 
     @dataclass
@@ -109,12 +109,15 @@ def test_config_snapshot_overrides_and_sections(isolated_registries):
         threshold: float = 1.0
         """A demo field."""
 
-    register_section("demo_section", DemoSection)
-    cfg = get_preset("orb-only", {"tracking.ratio": 0.8, "demo_section": {"threshold": 2}})
+    catalog = _catalog_with(sections={"demo_section": DemoSection})
+    cfg = catalog.preset("orb-only", {"tracking.ratio": 0.8, "demo_section": {"threshold": 2}})
     assert cfg.tracking.ratio == 0.8 and cfg.section("demo_section").threshold == 2.0
     d = cfg.to_dict()
     assert d["demo_section"] == {"threshold": 2.0} and d["name"] == "orb-only"
-    assert PipelineConfig.from_dict(d).to_dict() == d
+    assert catalog.config_from_dict(d).to_dict() == d
+    assert list(d)[-4:] == ["segmentation", "culling", "restoration", "demo_section"]
+    with pytest.raises(ConfigError, match="unknown config section 'demo_section'"):
+        shipped_catalog().config_from_dict(d)  # a catalog without the section refuses it, whatever was imported
     with pytest.raises(ConfigError):
         cfg.with_overrides({"tracking.no_such_field": 1})
     with pytest.raises(ConfigError):

@@ -14,9 +14,11 @@ import pytest
 from storage.config_ranges import check_ranges
 from storage.errors import InvalidInput
 from tests.backend.api.data import write_sequence
-from worker.slam.config import PipelineConfig
+from worker.slam.catalog import shipped_catalog
 from worker.slam.errors import ConfigError
 from worker.slam.ranges import RANGES_FILE, render, settings_ranges
+
+CATALOG = shipped_catalog()
 
 
 def test_the_committed_ranges_file_is_what_the_config_declares() -> None:
@@ -25,7 +27,7 @@ def test_the_committed_ranges_file_is_what_the_config_declares() -> None:
 
 def test_every_numeric_core_setting_has_a_range_holding_its_default() -> None:
     ranges = settings_ranges()
-    for section, values in PipelineConfig().to_dict().items():
+    for section, values in CATALOG.base_config().to_dict().items():
         if section in ("features", "tracking", "mapping", "loop", "dense", "eval"):
             for name, default in values.items():
                 if isinstance(default, int | float) and not isinstance(default, bool):
@@ -39,13 +41,13 @@ def test_worker_and_api_refuse_the_same_out_of_range_values(key: str) -> None:
     below = spec["min"] - 1 if spec["type"] == "int" else spec["min"] - abs(spec["min"]) * 0.5 - 1e-3
     for bad in (below, spec["max"] + 1):
         with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
-            PipelineConfig().with_overrides({key: bad})
+            CATALOG.base_config().with_overrides({key: bad})
         with pytest.raises(InvalidInput, match=key.replace(".", r"\.")):
             check_ranges({key: bad})
     for good in (spec["min"], spec["max"]):  # each bound, its pair's other side moved out of the way
         given = {key: good, **_partner_at_its_bound(key, good == spec["max"])}
         check_ranges(given)
-        value = PipelineConfig().with_overrides(given).to_dict()
+        value = CATALOG.base_config().with_overrides(given).to_dict()
     for part in key.split("."):
         value = value[part]
     assert value == good
@@ -69,7 +71,7 @@ def test_n_levels_zero_is_refused_and_extremes_inside_the_ranges_run(tmp_path: P
 
 def test_the_api_knows_every_setting_not_only_the_ranged_ones() -> None:
     """Booleans, strings and the stage sections' settings pass the api's check; unknown fields do not."""
-    snapshot = PipelineConfig.from_dict({}).to_dict()
+    snapshot = CATALOG.config_from_dict({}).to_dict()
     check_ranges({k: v for k, v in snapshot.items() if k not in ("name", "stages")})  # every default
     check_ranges({"dense.enabled": False, "dense.method": "tsdf", "loop": {"enabled": False}})
     assert "culling.culling.threshold.d_min" in settings_ranges()
@@ -116,7 +118,7 @@ def test_worker_and_api_refuse_pairs_that_contradict_each_other_naming_both(lo: 
     lowered = [{hi: hi_min}] if hi_min < default_lo else []  # only the maximum given, under the minimum
     for bad in ({lo: default_hi + step}, *lowered, nested):
         with pytest.raises(ConfigError) as worker:
-            PipelineConfig().with_overrides(bad)
+            CATALOG.base_config().with_overrides(bad)
         with pytest.raises(InvalidInput) as api:
             check_ranges(bad)
         for err in (worker.value, api.value):
@@ -125,22 +127,22 @@ def test_worker_and_api_refuse_pairs_that_contradict_each_other_naming_both(lo: 
     equal = {lo: default_hi}
     if strict:
         with pytest.raises(ConfigError, match="must be below"):
-            PipelineConfig().with_overrides(equal)
+            CATALOG.base_config().with_overrides(equal)
         with pytest.raises(InvalidInput, match="must be below"):
             check_ranges(equal)
     else:
         check_ranges(equal)
-        PipelineConfig().with_overrides(equal)
+        CATALOG.base_config().with_overrides(equal)
     check_ranges({lo: default_lo, hi: default_hi})  # in order: both sides pass
-    PipelineConfig().with_overrides({hi: default_hi}).with_overrides({lo: default_lo})
+    CATALOG.base_config().with_overrides({hi: default_hi}).with_overrides({lo: default_lo})
 
 
 def test_a_pair_is_checked_on_the_whole_config_not_each_override_alone() -> None:
     """A base that moved the maximum down refuses a minimum the defaults would take; a stored snapshot too."""
-    base = PipelineConfig().with_overrides({"features.max_depth_m": 2.0})
+    base = CATALOG.base_config().with_overrides({"features.max_depth_m": 2.0})
     with pytest.raises(ConfigError, match=r"features\.min_depth_m \(3\.0\) must be below features\.max_depth_m"):
         base.with_overrides({"features": {"min_depth_m": 3.0}})
-    snapshot = PipelineConfig().to_dict()
+    snapshot = CATALOG.base_config().to_dict()
     snapshot["tracking"]["keyframe_min_frames"] = snapshot["tracking"]["keyframe_max_frames"] + 1
     with pytest.raises(ConfigError, match="keyframe_min_frames"):
-        PipelineConfig.from_dict(snapshot)
+        CATALOG.config_from_dict(snapshot)

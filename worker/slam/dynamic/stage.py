@@ -1,4 +1,5 @@
-"""Pipeline stages of the dynamic front end: segmentation → culling (→ restoration, in inpainting/stage.py).
+"""Pipeline stage of the dynamic front end: (segmentation, in segmentation/stage.py →) culling (→ restoration,
+in inpainting/stage.py).
 
 The culling stage extracts the frame's ORB features once (the tracker reuses them), judges the objects against
 the previous frame and hands the tracker the features outside moving objects plus an exclude mask.
@@ -13,38 +14,16 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from formats.catalog import STAGE_CONTRACTS, provided_before
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig, valid
 from worker.slam.dynamic.culling import CullingConfig, CullingResult, cull_frame, dilate_disc, mask_at
-from worker.slam.errors import SequenceFormatError
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.types import Features
 from worker.slam.geometry.se3 import inv
 from worker.slam.io.sequence import Frame
-from worker.slam.segmentation.base import SegmenterConfig, make_segmenter
 from worker.slam.stages import FrameInputs, StageContext
 from worker.slam.truth import TruthScores
-
-
-@dataclass
-class SegmentationStageConfig:
-    """Which network marks potentially dynamic pixels."""
-
-    segmenter: SegmenterConfig = field(default_factory=lambda: SegmenterConfig(threads=1))
-    """One inference thread by default: on a small shared CPU more torch threads contend and run far slower."""
-    source: str = "network"
-    """`network` (the segmenter above) or `truth`: the sequence's true dynamic masks (`truth/masks`, from the
-    synthetic and augmented generators), an oracle that separates culling's errors from segmentation's."""
-    memory_frames: int = valid(1, 0, 30)
-    """The network's mask of a frame also marks what it marked in the previous this-many frames (0 = off): a
-    person the network misses in one frame stays marked, and geometry still judges every segment. 1 (chosen on
-    the development sequences: `no-restoration` mean 0.0377 -> 0.0311 m; 2 and 3 frames 0.0314, 0.0330) also
-    held on AUG 1000 (0.0467 -> 0.0417) and on the real Bonn frames (0.0406 -> 0.0242; the teacher's masks
-    0.0186 -> 0.0182)."""
-
-    def __post_init__(self) -> None:
-        if self.source not in ("network", "truth"):
-            raise ValueError(f"segmentation.source must be 'network' or 'truth', not {self.source!r}")
 
 
 @dataclass
@@ -83,48 +62,15 @@ class _PastFrame:
     T_WC: np.ndarray | None = None
 
 
-class SegmentationStage:
-    name = "segmentation"
-
-    def __init__(self, config: PipelineConfig, camera: Camera) -> None:
-        cfg: SegmentationStageConfig = config.section("segmentation")
-        self.segmenter = make_segmenter(cfg.segmenter) if cfg.source == "network" else None
-        self.recent: deque[np.ndarray] = deque(maxlen=cfg.memory_frames)  # the network's last masks
-
-    def prepare(self, frame: Frame) -> np.ndarray | None:
-        """The network's potentially dynamic pixels, bool (H,W): from the RGB alone, so the pipeline may run it
-        ahead on another thread. None for the truth source (read in `process`: it needs the run's truth)."""
-        return None if self.segmenter is None else self.segmenter.segment(frame.rgb).dynamic_mask()
-
-    def _remembered(self, mask: np.ndarray | None) -> np.ndarray | None:
-        """The network's `mask` (H, W) bool or'ed with the last `memory_frames` ones, which it joins."""
-        if mask is None or not self.recent.maxlen:
-            return mask
-        out = np.logical_or.reduce([mask, *self.recent])
-        self.recent.append(mask)
-        return out
-
-    def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
-        mask = inputs.prepared.get(self.name)
-        if self.segmenter is None:
-            if ctx.truth is None:
-                raise SequenceFormatError("segmentation.source 'truth' needs a sequence with truth/ masks",
-                                          path=ctx.sequence.root if ctx.sequence is not None else None)
-            mask = ctx.truth.mask(frame.index)
-        else:
-            mask = self._remembered(mask if isinstance(mask, np.ndarray) else self.prepare(frame))
-        assert isinstance(mask, np.ndarray)
-        inputs.potentially_dynamic = mask
-        inputs.info["potentially_dynamic_fraction"] = float(mask.mean())
-        return inputs
-
-
 class CullingStage:
-    name = "culling"
+    contract = STAGE_CONTRACTS["culling"]
+    name = contract.name
 
     def __init__(self, config: PipelineConfig, camera: Camera) -> None:
         self.cfg: CullingStageConfig = config.section("culling")
-        self.use_segmentation = "segmentation" in config.stages
+        # Segmentation's mask is an optional input: used (if `culling.use_segmentation`, default on) when an
+        # earlier stage provides it, else culling judges geometric clusters alone (`geometry-only`).
+        self.use_segmentation = "potentially_dynamic" in provided_before(config.stages, self.name)
         self.camera = camera
         # its own extractor (the tracker's settings): `prepare` may run on another thread than the tracker's
         self.extractor = OrbExtractor(config.features)

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
+from formats.catalog import STAGE_CONTRACTS
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig, valid
 from worker.slam.features.orb import OrbExtractor
@@ -110,7 +111,8 @@ class _Tracked:
 
 
 class RestorationStage:
-    name = "restoration"
+    contract = STAGE_CONTRACTS["restoration"]
+    name = contract.name
 
     def __init__(self, config: PipelineConfig, camera: Camera) -> None:
         self.cfg: RestorationStageConfig = config.section("restoration")

@@ -7,10 +7,10 @@ from typing import cast
 import numpy as np
 
 from worker.slam.camera import Camera
-from worker.slam.dynamic.stage import SegmentationStage
 from worker.slam.io.sequence import Frame
 from worker.slam.presets import get_preset
 from worker.slam.segmentation.base import SegmentationResult
+from worker.slam.segmentation.stage import SegmentationStage
 from worker.slam.stages import FrameInputs, StageContext
 
 
