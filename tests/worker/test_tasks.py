@@ -10,8 +10,8 @@ import pytest
 from huey import SqliteHuey
 
 from formats.artifacts import PIPELINE_OUTPUTS
-from storage.jobqueue import make_enqueue
 from storage.models import JobStatus
+from storage.queue import make_enqueue
 from storage.repositories import jobs, metrics, sequences
 from storage.settings import get_settings
 from tests.backend.api.data import write_sequence
