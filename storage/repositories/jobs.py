@@ -210,13 +210,6 @@ def heartbeat(session: Session, job_id: str, attempt: int | None = None) -> bool
         )
 
 
-def is_cancel_requested(session: Session, job_id: str) -> bool:
-    flag = session.scalar(select(Job.cancel_requested).where(Job.id == job_id))
-    if flag is None:
-        raise NotFound(f"job {job_id} not found", {"id": job_id})
-    return bool(flag)
-
-
 def request_cancel(session: Session, job_id: str) -> Job:
     """Cancel a job: a queued one at once, a running one by flag (its worker stops and finishes it).
 
@@ -417,26 +410,6 @@ def reap_stale(
     """Requeue or fail running jobs whose worker has not reported for ``older_than_s`` seconds."""
     cutoff = utcnow() - timedelta(seconds=older_than_s)
     return _reap(session, [func.coalesce(Job.heartbeat_at, Job.started_at) < cutoff], error, requeue_limit)
-
-
-def fail_orphaned(
-    session: Session,
-    *,
-    worker: str | None = None,
-    error: str = "the worker stopped before the job finished",
-) -> list[str]:
-    """Fail jobs left running by a dead worker (:func:`reap_orphaned` without requeues); their ids."""
-    return reap_orphaned(session, worker=worker, error=error).failed
-
-
-def fail_stale(
-    session: Session,
-    *,
-    older_than_s: float,
-    error: str = "the worker stopped reporting (died or lost its connection); retry the job",
-) -> list[str]:
-    """Fail running jobs whose worker has not reported for ``older_than_s`` seconds; their ids."""
-    return reap_stale(session, older_than_s=older_than_s, error=error).failed
 
 
 def discard_results(session: Session, job_id: str) -> None:
