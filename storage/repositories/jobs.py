@@ -301,8 +301,7 @@ def retry(session: Session, job_id: str) -> Job:
             cancel_requested=False,
         )
         if done:
-            session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id == job_id))
-            session.execute(sql_delete(FrameStat).where(FrameStat.job_id == job_id))
+            _drop_results(session, [job_id])
     job = get(session, job_id)
     if not done:
         raise Conflict(
@@ -359,8 +358,7 @@ def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeu
             )
             reaped.requeued = list(session.scalars(stmt))
             if reaped.requeued:  # a worker killed while saving may have stored some
-                session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id.in_(reaped.requeued)))
-                session.execute(sql_delete(FrameStat).where(FrameStat.job_id.in_(reaped.requeued)))
+                _drop_results(session, reaped.requeued)
         stmt = (  # this death follows automatic requeues after earlier ones: a poison job
             update(Job)
             .where(*running, Job.requeues >= POISON_DEATHS - 1, Job.cancel_requested.is_(False))
@@ -379,8 +377,7 @@ def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeu
         )
         reaped.failed = [*reaped.poisoned, *session.scalars(stmt)]
         if reaped.failed:  # a failed job never shows the half of a result
-            session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id.in_(reaped.failed)))
-            session.execute(sql_delete(FrameStat).where(FrameStat.job_id.in_(reaped.failed)))
+            _drop_results(session, reaped.failed)
     return reaped
 
 
@@ -415,8 +412,13 @@ def reap_stale(
 def discard_results(session: Session, job_id: str) -> None:
     """Drop a job's stored metrics and frame stats (a save that failed half-way)."""
     with writing(session):
-        session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id == job_id))
-        session.execute(sql_delete(FrameStat).where(FrameStat.job_id == job_id))
+        _drop_results(session, [job_id])
+
+
+def _drop_results(session: Session, job_ids: list[str]) -> None:
+    """Delete the metrics and frame stats of ``job_ids`` inside the caller's transaction."""
+    session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id.in_(job_ids)))
+    session.execute(sql_delete(FrameStat).where(FrameStat.job_id.in_(job_ids)))
 
 
 def delete(session: Session, job_id: str) -> None:
