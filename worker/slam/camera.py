@@ -78,6 +78,7 @@ class Camera:
             kw["dist"] = tuple(kw["dist"]) + (0.0,) * (5 - len(kw["dist"]))  # k1 k2 p1 p2 without k3
         return cls(**kw)
 
+
 PRESETS: dict[str, Camera] = {
     name: Camera(**asdict(c), name=name)
     for name, c in CAMERA_PRESETS.items()
