@@ -18,10 +18,10 @@ def test_every_error_tree_hangs_under_the_root_with_its_code() -> None:
         err = cls("m", {"k": 1})
         assert isinstance(err, VtdError) and (err.code, err.http_status) == (code, status)
         assert (err.message, err.detail, str(err)) == ("m", {"k": 1}, "m")
-    for cls, code in ((slam_errors.ConfigError, "invalid_config"), (slam_errors.CameraError, "invalid_camera"),
-                      (slam_errors.EvaluationError, "evaluation_failed")):
-        err = cls("m")
-        assert isinstance(err, VtdError) and err.code == code and err.detail == {}
+    for slam_cls, code in ((slam_errors.ConfigError, "invalid_config"), (slam_errors.CameraError, "invalid_camera"),
+                           (slam_errors.EvaluationError, "evaluation_failed")):
+        slam_err = slam_cls("m")
+        assert isinstance(slam_err, VtdError) and slam_err.code == code and slam_err.detail == {}
     seq = slam_errors.SequenceFormatError("bad", path="a.txt", line=3)
     assert isinstance(seq, VtdError) and str(seq) == "a.txt:3: bad" and seq.detail == {"path": "a.txt", "line": 3}
 
