@@ -47,8 +47,7 @@ class LazyEnqueue:
     def __call__(self, job_id: str) -> None:
         with self._lock:
             if self._fn is None:
-                from storage.jobqueue import make_enqueue
-                from storage.queue import make_huey
+                from storage.queue import make_enqueue, make_huey
 
                 self._fn = make_enqueue(make_huey(self.settings))
         self._fn(job_id)

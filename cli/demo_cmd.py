@@ -22,9 +22,8 @@ def register_and_submit_demo(sequence_dir: Path, preset: str) -> str:
     from storage.artifacts import ArtifactStore
     from storage.db import init_db, make_engine, make_session_factory
     from storage.ingest import register_folder
-    from storage.jobqueue import make_enqueue
     from storage.presets import check_preset, parse_camera_spec
-    from storage.queue import make_huey
+    from storage.queue import make_enqueue, make_huey
     from storage.repositories import jobs
     from storage.settings import get_settings
 

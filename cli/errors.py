@@ -3,20 +3,15 @@ from __future__ import annotations
 
 import typer
 
+from formats.errors import VtdError
+
 EXIT_BAD_INPUT = 2
-
-
-def _domain_error_types() -> tuple[type[Exception], ...]:
-    from storage.errors import StorageError
-    from worker.slam.errors import SlamError
-
-    return (SlamError, StorageError)
 
 
 def run_with_error_mapping(app: typer.Typer) -> int:
     try:
         app(standalone_mode=False)
-    except _domain_error_types() as exc:
+    except VtdError as exc:  # the one root of storage's, the pipeline's and formats' errors
         typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
         return EXIT_BAD_INPUT
     except typer.Abort:

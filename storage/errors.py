@@ -1,4 +1,4 @@
-"""The service's one exception tree.
+"""The service's exception tree, under the project's root :class:`formats.errors.VtdError`.
 
 The api maps ``http_status``/``code`` to ``{"error": {"code", "message", "detail"}}``, the worker turns
 any of them into a failed job with ``message``, the CLI into an exit code.
@@ -8,19 +8,16 @@ from __future__ import annotations
 
 from typing import Any
 
+from formats.errors import VtdError
 
-class ServiceError(Exception):
+
+class ServiceError(VtdError):
     """Anything the service answers with an error body: ``code``, ``http_status``, ``message`` and
     ``detail`` (optional JSON-able context for the client). Domain errors are :class:`StorageError`; the
     api's own (a dependency it fronts is down) live in ``backend``."""
 
     code: str = "error"
     http_status: int = 500
-
-    def __init__(self, message: str, detail: Any = None) -> None:
-        super().__init__(message)
-        self.message = message
-        self.detail = detail
 
     def to_dict(self) -> dict[str, Any]:
         """The error body the api returns (under the ``"error"`` key)."""

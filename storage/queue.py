@@ -1,7 +1,13 @@
-"""The task queue factory. Tasks are defined by the worker; the api only enqueues."""
+"""The task queue: the huey factory and the contract between the api (enqueues) and the worker (executes).
+
+There is one task, ``run_job(job_id)``. huey routes a message by its task's ``module.name``; both sides
+register the task through :func:`register_run_job`, so the name is the same while the api never imports the
+worker. The api registers it without a body (it only enqueues); the worker passes the function that runs the job.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -11,6 +17,7 @@ from storage.errors import ConfigurationError
 from storage.settings import Settings
 
 QUEUE_NAME = "vtdslam"
+TASK_NAME = "run_job"
 
 
 def make_huey(settings: Settings, **kwargs: Any) -> Huey:
@@ -33,3 +40,27 @@ def make_huey(settings: Settings, **kwargs: Any) -> Huey:
         "VTD_QUEUE_URL must be redis://…, rediss://…, unix://… or sqlite:///PATH",
         {"queue_url": url},
     )
+
+
+def register_run_job(huey: Huey, body: Callable[[str], object] | None = None) -> Any:
+    """Register ``run_job(job_id)`` on ``huey`` and return the task (call it to enqueue).
+
+    Jobs are never retried by the queue: retries are explicit (``POST /jobs/{id}/retry``).
+    """
+
+    def run_job(job_id: str) -> None:
+        if body is None:
+            raise RuntimeError("run_job was registered without a body: only a worker executes jobs")
+        body(job_id)
+
+    return huey.task(name=TASK_NAME, retries=0)(run_job)
+
+
+def make_enqueue(huey: Huey) -> Callable[[str], None]:
+    """A function that puts a job id on the queue (what the api calls after creating a job row)."""
+    task = register_run_job(huey)
+
+    def enqueue(job_id: str) -> None:
+        task(job_id)
+
+    return enqueue

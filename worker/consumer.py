@@ -20,7 +20,7 @@ from storage.db import init_db, make_engine, make_session_factory
 from storage.queue import make_huey
 from storage.settings import Settings
 from worker.identity import claim_name
-from worker.reaping import reap_orphans, reap_stale, start_reaper
+from worker.reaping import reap_orphans, start_reaper
 from worker.runner import PipelineFn, run_slam
 from worker.tasks import WorkerContext, register_tasks
 
@@ -45,16 +45,6 @@ def make_worker_huey(settings: Settings, ctx: WorkerContext, **kwargs: Any) -> H
     task = register_tasks(huey, ctx)
     ctx.enqueue = lambda job_id: task(job_id)  # never a second registration: it would replace the body
     return huey
-
-
-def fail_orphans(ctx: WorkerContext) -> list[str]:
-    """Jobs this worker name left running when its process died: requeued or failed; their ids."""
-    return reap_orphans(ctx).all
-
-
-def fail_stale(ctx: WorkerContext, timeout_s: float) -> list[str]:
-    """Jobs of any worker that stopped reporting: requeued or failed; their ids."""
-    return reap_stale(ctx, timeout_s).all
 
 
 class _StoppingConsumer(Consumer):

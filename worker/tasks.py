@@ -6,7 +6,7 @@ running elsewhere) stores nothing and leaves the new attempt alone.
 
 :func:`execute_job` holds the whole flow and takes a :class:`WorkerContext` (settings, sessions, store,
 the pipeline function), so tests run it directly with a fake pipeline; :func:`register_tasks` puts it on
-a huey instance under the queue contract's name (``storage.jobqueue``).
+a huey instance under the queue contract's name (``storage.queue``).
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ from formats.frame_stats import STORED_COLUMNS, format_frame_stats
 from formats.run_metrics import RunMetrics
 from storage.artifacts import ArtifactStore
 from storage.errors import Conflict, NotFound, StorageError
-from storage.jobqueue import register_run_job
 from storage.models import JobStatus
+from storage.queue import register_run_job
 from storage.redact import redact_paths
 from storage.repositories import jobs, metrics, sequences
 from storage.settings import Settings

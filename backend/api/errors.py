@@ -22,7 +22,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from backend.api.edge import REQUEST_ID_HEADER, request_id_of
-from storage.errors import ServiceError, StorageError, Unauthorized
+from storage.errors import ServiceError, Unauthorized
 from storage.redact import redact_paths
 
 log = logging.getLogger("backend.api")
@@ -123,9 +123,8 @@ def install_error_handlers(app: FastAPI) -> None:
             response.headers[REQUEST_ID_HEADER] = rid
         return response
 
-    @app.exception_handler(StorageError)
-    @app.exception_handler(ApiError)
-    async def _storage_error(request: Request, exc: StorageError | ApiError) -> JSONResponse:
+    @app.exception_handler(ServiceError)  # the domain's (StorageError) and the api's own (ApiError)
+    async def _service_error(request: Request, exc: ServiceError) -> JSONResponse:
         headers = {"WWW-Authenticate": "Bearer"} if isinstance(exc, Unauthorized) else None
         if exc.http_status >= 500 and not isinstance(exc, ApiError):
             # a domain 5xx may wrap a database error (its SQL and parameters): logged, never sent

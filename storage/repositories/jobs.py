@@ -210,13 +210,6 @@ def heartbeat(session: Session, job_id: str, attempt: int | None = None) -> bool
         )
 
 
-def is_cancel_requested(session: Session, job_id: str) -> bool:
-    flag = session.scalar(select(Job.cancel_requested).where(Job.id == job_id))
-    if flag is None:
-        raise NotFound(f"job {job_id} not found", {"id": job_id})
-    return bool(flag)
-
-
 def request_cancel(session: Session, job_id: str) -> Job:
     """Cancel a job: a queued one at once, a running one by flag (its worker stops and finishes it).
 
@@ -308,8 +301,7 @@ def retry(session: Session, job_id: str) -> Job:
             cancel_requested=False,
         )
         if done:
-            session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id == job_id))
-            session.execute(sql_delete(FrameStat).where(FrameStat.job_id == job_id))
+            _drop_results(session, [job_id])
     job = get(session, job_id)
     if not done:
         raise Conflict(
@@ -366,8 +358,7 @@ def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeu
             )
             reaped.requeued = list(session.scalars(stmt))
             if reaped.requeued:  # a worker killed while saving may have stored some
-                session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id.in_(reaped.requeued)))
-                session.execute(sql_delete(FrameStat).where(FrameStat.job_id.in_(reaped.requeued)))
+                _drop_results(session, reaped.requeued)
         stmt = (  # this death follows automatic requeues after earlier ones: a poison job
             update(Job)
             .where(*running, Job.requeues >= POISON_DEATHS - 1, Job.cancel_requested.is_(False))
@@ -386,8 +377,7 @@ def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeu
         )
         reaped.failed = [*reaped.poisoned, *session.scalars(stmt)]
         if reaped.failed:  # a failed job never shows the half of a result
-            session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id.in_(reaped.failed)))
-            session.execute(sql_delete(FrameStat).where(FrameStat.job_id.in_(reaped.failed)))
+            _drop_results(session, reaped.failed)
     return reaped
 
 
@@ -419,31 +409,16 @@ def reap_stale(
     return _reap(session, [func.coalesce(Job.heartbeat_at, Job.started_at) < cutoff], error, requeue_limit)
 
 
-def fail_orphaned(
-    session: Session,
-    *,
-    worker: str | None = None,
-    error: str = "the worker stopped before the job finished",
-) -> list[str]:
-    """Fail jobs left running by a dead worker (:func:`reap_orphaned` without requeues); their ids."""
-    return reap_orphaned(session, worker=worker, error=error).failed
-
-
-def fail_stale(
-    session: Session,
-    *,
-    older_than_s: float,
-    error: str = "the worker stopped reporting (died or lost its connection); retry the job",
-) -> list[str]:
-    """Fail running jobs whose worker has not reported for ``older_than_s`` seconds; their ids."""
-    return reap_stale(session, older_than_s=older_than_s, error=error).failed
-
-
 def discard_results(session: Session, job_id: str) -> None:
     """Drop a job's stored metrics and frame stats (a save that failed half-way)."""
     with writing(session):
-        session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id == job_id))
-        session.execute(sql_delete(FrameStat).where(FrameStat.job_id == job_id))
+        _drop_results(session, [job_id])
+
+
+def _drop_results(session: Session, job_ids: list[str]) -> None:
+    """Delete the metrics and frame stats of ``job_ids`` inside the caller's transaction."""
+    session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id.in_(job_ids)))
+    session.execute(sql_delete(FrameStat).where(FrameStat.job_id.in_(job_ids)))
 
 
 def delete(session: Session, job_id: str) -> None:

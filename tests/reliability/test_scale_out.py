@@ -58,7 +58,7 @@ def test_two_workers_on_redis_and_postgres_run_a_batch_once_each(scaled: Setting
         logs = "".join(procs.log_of(w) for w in workers)
         starts = Counter(re.findall(r"job ([0-9a-f]{32}): orb-only on sequence", logs))
         assert starts == Counter({j: 1 for j in ids}), starts  # one claim (one pipeline run) per job
-        assert logs.count("Executing storage.jobqueue.run_job") == JOBS  # one queue delivery per job
+        assert logs.count("Executing storage.queue.run_job") == JOBS  # one queue delivery per job
         for j in ids:
             names_ = {a["name"] for a in client.get(f"/api/v1/jobs/{j}/artifacts").json()}
             assert {"trajectory.txt", "map.ply", "metrics.json", "log.txt"} <= names_, (j, names_)

@@ -46,7 +46,7 @@ class WorkerLike(threading.Thread):
 
     def __init__(self, settings: Settings, stop: threading.Event) -> None:
         super().__init__(name="worker-like", daemon=True)
-        from storage.jobqueue import register_run_job
+        from storage.queue import register_run_job
 
         self.huey = make_huey(settings)
         register_run_job(self.huey)  # so dequeued messages deserialise to the task

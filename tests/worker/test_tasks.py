@@ -11,12 +11,13 @@ from huey import SqliteHuey
 
 from formats.artifacts import PIPELINE_OUTPUTS
 from formats.frame_stats import FrameStats
-from storage.jobqueue import make_enqueue
 from storage.models import JobStatus
+from storage.queue import make_enqueue
 from storage.repositories import jobs, metrics, sequences
 from storage.settings import get_settings
 from tests.backend.api.data import write_sequence
-from worker.consumer import build_context, fail_orphans
+from worker.consumer import build_context
+from worker.reaping import reap_orphans
 from worker.runner import Cancelled, RunOutput
 from worker.tasks import WorkerContext, execute_job, register_tasks
 
@@ -169,7 +170,7 @@ def test_orphans_of_this_worker_name_are_failed_on_start(ctx, job_id):
         assert jobs.claim(s, job_id, "w1")
         other = jobs.create(s, sequence_id=jobs.get(s, job_id).sequence_id, preset="orb-only")
         assert jobs.claim(s, other.id, "w2")
-    assert fail_orphans(ctx) == [job_id]
+    assert reap_orphans(ctx).all == [job_id]
     assert _job(ctx, job_id).status == JobStatus.FAILED and "stopped" in _job(ctx, job_id).error
     assert _job(ctx, other.id).status == JobStatus.RUNNING
 

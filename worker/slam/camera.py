@@ -7,7 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
+from formats.camera_spec import check_intrinsics
 from formats.catalog import CAMERA_PRESETS
+from formats.errors import SpecError
 from worker.slam.errors import CameraError
 
 
@@ -66,26 +68,15 @@ class Camera:
 
     @classmethod
     def from_dict(cls, d: dict) -> Camera:
-        known = {f for f in cls.__dataclass_fields__}
-        unknown = set(d) - known
-        if unknown:
-            raise CameraError(f"unknown camera fields: {sorted(unknown)}")
+        """Explicit intrinsics checked by ``formats.camera_spec`` (the api's rules: finite, plausible, the
+        principal point inside the image); 4 distortion coefficients get k3 = 0."""
         try:
-            kw = dict(d)
-            if "dist" in kw:
-                dist = [float(x) for x in kw["dist"]]
-                if len(dist) == 4:  # k1 k2 p1 p2 without k3
-                    dist.append(0.0)
-                kw["dist"] = tuple(dist)
-            for k in ("fx", "fy", "cx", "cy", "depth_scale"):
-                if k in kw:
-                    kw[k] = float(kw[k])
-            for k in ("width", "height"):
-                if k in kw:
-                    kw[k] = int(kw[k])
-            return cls(**kw)
-        except (TypeError, ValueError) as exc:
-            raise CameraError(f"invalid camera: {exc}") from exc
+            kw = check_intrinsics(d)
+        except SpecError as exc:
+            raise CameraError(exc.message, detail=exc.detail) from exc
+        if "dist" in kw:
+            kw["dist"] = tuple(kw["dist"]) + (0.0,) * (5 - len(kw["dist"]))  # k1 k2 p1 p2 without k3
+        return cls(**kw)
 
 
 PRESETS: dict[str, Camera] = {

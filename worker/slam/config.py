@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from formats.errors import SpecError
+from formats.settings_check import PAIR_RULES, check_pair, check_setting, kind_of
 from worker.slam.errors import ConfigError
 
 
@@ -348,7 +349,7 @@ def _apply(obj: Any, values: dict, where: str) -> Any:
         elif isinstance(cur, tuple) and isinstance(val, (list, tuple)):
             changes[key] = tuple(val)
         else:
-            changes[key] = _in_range(fields[key], _coerce(cur, val, f"{where}.{key}"), f"{where}.{key}")
+            changes[key] = _coerce(cur, val, f"{where}.{key}", fields[key].metadata.get("range"))
     if type(obj).__dataclass_params__.frozen:
         try:
             obj = dataclasses.replace(obj, **changes)  # runs the section's own checks (__post_init__)
@@ -367,54 +368,24 @@ def _apply(obj: Any, values: dict, where: str) -> Any:
     return obj
 
 
-_PAIRS = (("below", "below", lambda lo, hi: lo < hi), ("at_most", "at most", lambda lo, hi: lo <= hi))
-
-
 def _check_pairs(obj: Any, where: str) -> None:
     """Each ``below``/``at_most`` pair of ``obj`` (see :func:`valid`) in order, else a :class:`ConfigError`
-    naming both fields (the api's ``storage.config_ranges`` says the same from the published ranges)."""
+    naming both fields (``formats.settings_check``'s rule, which the api applies to the published ranges)."""
     for f in dataclasses.fields(obj):
-        for key, words, ok in _PAIRS:
-            other = f.metadata.get(key)
+        for rule in PAIR_RULES:
+            other = f.metadata.get(rule)
             if other is None:
                 continue
-            lo, hi = getattr(obj, f.name), getattr(obj, other)
-            if not ok(lo, hi):
-                lo_key, hi_key = f"{where}.{f.name}", f"{where}.{other}"
-                raise ConfigError(f"{lo_key} ({lo!r}) must be {words} {hi_key} ({hi!r})",
-                                  detail={"field": lo_key, "fields": [lo_key, hi_key], "values": [lo, hi]})
+            try:
+                check_pair(rule, f"{where}.{f.name}", getattr(obj, f.name), f"{where}.{other}", getattr(obj, other))
+            except SpecError as exc:
+                raise ConfigError(exc.message, detail=exc.detail) from exc
 
 
-def _in_range(f: dataclasses.Field, val: Any, where: str) -> Any:
-    bounds = f.metadata.get("range")
-    if bounds is not None and not bounds[0] <= val <= bounds[1]:
-        lo, hi = bounds
-        raise ConfigError(f"{where} must be within {lo}..{hi}, got {val!r}",
-                          detail={"field": where, "min": lo, "max": hi, "value": val})
-    return val
-
-
-def _coerce(current: Any, val: Any, where: str) -> Any:
-    """Keep the field's type (bools stay bools, ints stay ints) so a bad snapshot fails early and clearly."""
+def _coerce(current: Any, val: Any, where: str, bounds: tuple[float, float] | None = None) -> Any:
+    """``val`` with the field's type (bools stay bools, ints stay ints) and within its ``bounds``, so a bad
+    snapshot fails early and clearly: ``formats.settings_check``'s rules, the api's too."""
     try:
-        if isinstance(current, bool):
-            if isinstance(val, bool):
-                return val
-            if isinstance(val, str) and val.lower() in ("true", "false", "1", "0", "yes", "no"):
-                return val.lower() in ("true", "1", "yes")
-            raise ValueError(f"expected a boolean, got {val!r}")
-        if isinstance(current, int):
-            if isinstance(val, bool) or (isinstance(val, float) and not val.is_integer()):
-                raise ValueError(f"expected an integer, got {val!r}")
-            return int(val)
-        if isinstance(current, float):
-            if isinstance(val, bool):
-                raise ValueError(f"expected a number, got {val!r}")
-            if not math.isfinite(float(val)):
-                raise ValueError(f"expected a finite number, got {val!r}")
-            return float(val)
-        if isinstance(current, str):
-            return str(val)
-        return val
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"invalid value for {where}: {exc}", detail={"field": where}) from exc
+        return check_setting(where, val, kind_of(current), bounds)
+    except SpecError as exc:
+        raise ConfigError(exc.message, detail=exc.detail) from exc

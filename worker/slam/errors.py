@@ -1,18 +1,20 @@
-"""The pipeline's exception tree. Converted to a failed job in the worker and an exit code in the CLI."""
+"""The pipeline's exception tree, under the project's root :class:`formats.errors.VtdError`. Converted to a
+failed job in the worker and an exit code in the CLI."""
 from __future__ import annotations
 
 from pathlib import Path
 
+from formats.errors import VtdError
 
-class SlamError(Exception):
+
+class SlamError(VtdError):
     """Root of every error the pipeline raises on purpose. `code` is stable and machine-readable."""
 
     code = "slam_error"
+    detail: dict
 
     def __init__(self, message: str, *, detail: dict | None = None) -> None:
-        super().__init__(message)
-        self.message = message
-        self.detail = detail or {}
+        super().__init__(message, detail or {})
 
 
 class SequenceFormatError(SlamError):

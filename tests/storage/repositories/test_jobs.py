@@ -133,7 +133,7 @@ def test_cancel_running_job_flags_worker(session: Session, job: Job) -> None:
     assert jobs.claim(session, job.id, "w")
     got = jobs.request_cancel(session, job.id)
     assert got.status == JobStatus.RUNNING and got.cancel_requested
-    assert jobs.is_cancel_requested(session, job.id)
+    assert jobs.get(session, job.id).cancel_requested
     assert jobs.update_progress(session, job.id, progress=0.5) is True  # the worker is told to stop
     done = jobs.finish(session, job.id, JobStatus.CANCELLED, error="cancelled by user")
     assert (done.status, done.error) == (JobStatus.CANCELLED, "cancelled by user")
@@ -196,16 +196,16 @@ def test_retry_other_states_conflict(session: Session, job: Job, state: str) -> 
     assert jobs.get(session, job.id).attempts == 1
 
 
-def test_fail_orphaned(session: Session, seq: Sequence) -> None:
+def test_reap_orphaned_without_requeues_fails(session: Session, seq: Sequence) -> None:
     a, b, c, queued = (jobs.create(session, sequence_id=seq.id, preset="full") for _ in range(4))
     assert jobs.claim(session, a.id, "host1-1") and jobs.claim(session, b.id, "host2-1")
     assert jobs.claim(session, c.id, "host1-1")
     jobs.finish(session, c.id, "succeeded")
-    assert jobs.fail_orphaned(session, worker="host1-1") == [a.id]
+    assert jobs.reap_orphaned(session, worker="host1-1").failed == [a.id]
     got = jobs.get(session, a.id)
     assert (got.status, got.error) == (JobStatus.FAILED, "the worker stopped before the job finished")
-    assert jobs.fail_orphaned(session) == [b.id]
-    assert jobs.fail_orphaned(session) == []
+    assert jobs.reap_orphaned(session).failed == [b.id]
+    assert jobs.reap_orphaned(session).failed == []
     assert jobs.get(session, c.id).status == JobStatus.SUCCEEDED
     assert jobs.get(session, queued.id).status == JobStatus.QUEUED
     assert jobs.retry(session, a.id).status == JobStatus.QUEUED
@@ -246,7 +246,7 @@ def test_other_session_sees_fresh_progress(
     assert jobs.list_jobs(session)[0].status == JobStatus.RUNNING
 
 
-def test_fail_stale_uses_the_heartbeat(session: Session, seq: Sequence) -> None:
+def test_reap_stale_uses_the_heartbeat(session: Session, seq: Sequence) -> None:
     import time
 
     alive, dead = (jobs.create(session, sequence_id=seq.id, preset="full") for _ in range(2))
@@ -254,11 +254,11 @@ def test_fail_stale_uses_the_heartbeat(session: Session, seq: Sequence) -> None:
     assert jobs.get(session, dead.id).heartbeat_at is not None
     time.sleep(1.2)
     jobs.update_progress(session, alive.id, frames_done=3)  # w1 reports, w2 has gone silent
-    assert jobs.fail_stale(session, older_than_s=1.0) == [dead.id]
+    assert jobs.reap_stale(session, older_than_s=1.0).failed == [dead.id]
     got = jobs.get(session, dead.id)
     assert got.status == JobStatus.FAILED and "stopped reporting" in (got.error or "")
     assert jobs.get(session, alive.id).status == JobStatus.RUNNING
-    assert jobs.fail_stale(session, older_than_s=1.0) == []
+    assert jobs.reap_stale(session, older_than_s=1.0).failed == []
 
 
 def test_reap_requeues_up_to_the_limit_then_fails(session: Session, seq: Sequence) -> None:

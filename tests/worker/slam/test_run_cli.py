@@ -35,3 +35,25 @@ def test_run_command_errors(tmp_path):
     res = CliRunner().invoke(app, ["run", str(seq), "--camera", "tum3", "--out", str(tmp_path / "o"),
                                    "--config", "{not json"])
     assert res.exit_code != 0 and isinstance(res.exception, ConfigError)
+
+
+def test_run_refuses_intrinsics_the_api_refuses(tmp_path):
+    """`--camera '{...}'` goes through formats.camera_spec like an upload: a principal point outside the image
+    and an implausible focal length are refused before any frame is read."""
+    seq = write_sequence(tmp_path / "room", trajectory(2))
+    for spec, words in (('{"fx": 500, "fy": 500, "cx": 900, "cy": 240}', "cx must lie inside the image"),
+                        ('{"fx": 5, "fy": 500, "cx": 320, "cy": 240}', "fx must be within 50..5000")):
+        (seq / "camera.json").unlink(missing_ok=True)
+        res = CliRunner().invoke(app, ["run", str(seq), "--camera", spec, "--out", str(tmp_path / "o")])
+        assert isinstance(res.exception, CameraError) and words in res.exception.message
+
+
+def test_the_cli_maps_every_error_of_the_root_to_exit_2(tmp_path, monkeypatch, capsys):
+    from cli.errors import EXIT_BAD_INPUT, run_with_error_mapping
+
+    seq = write_sequence(tmp_path / "room", trajectory(2))
+    (seq / "camera.json").unlink()
+    monkeypatch.setattr("sys.argv", ["vtdslam", "run", str(seq), "--camera", '{"fx": 5, "fy": 500, "cx": 320, '
+                                     '"cy": 240}', "--out", str(tmp_path / "o")])
+    assert run_with_error_mapping(app) == EXIT_BAD_INPUT
+    assert "fx must be within" in capsys.readouterr().err

@@ -91,10 +91,10 @@ def test_no_pairs_within_tolerance(tmp_path):
 
 def test_camera_file_in_folder_wins(tmp_path):
     root = write_sequence(tmp_path)
-    (root / "camera.json").write_text(json.dumps({"fx": 40, "fy": 41, "cx": 30, "cy": 20, "depth_scale": 1000,
+    (root / "camera.json").write_text(json.dumps({"fx": 60, "fy": 61, "cx": 30, "cy": 20, "depth_scale": 1000,
                                                   "width": 64, "height": 48}))
     seq = Sequence(root, camera_from_preset("tum3"))
-    assert seq.camera.fx == 40 and seq.camera_source == "camera.json"
+    assert seq.camera.fx == 60 and seq.camera_source == "camera.json"
     assert np.allclose(seq[0].depth, 5.0)  # 5000 / 1000
 
 

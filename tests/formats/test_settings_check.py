@@ -1,0 +1,75 @@
+"""formats.settings_check: the one rule book of a setting's type, range and pairs, the same on both sides of
+the api/worker wall (the api through storage.config_ranges, the worker through PipelineConfig)."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from formats.errors import SpecError, VtdError
+from formats.settings_check import check_config, check_pair, check_setting, kind_of, settings_ranges
+from storage.config_ranges import check_ranges
+from storage.errors import InvalidInput
+from worker.slam.config import PipelineConfig
+from worker.slam.errors import ConfigError
+
+
+@pytest.mark.parametrize(("value", "kind", "bounds", "want"), [
+    (8, "int", (1, 16), 8), (8.0, "int", (1, 16), 8), (0.5, "float", (0.1, 1.0), 0.5), (1, "float", None, 1.0),
+    (True, "bool", None, True), ("yes", "bool", None, True), ("0", "bool", None, False), ("points", "str", None,
+                                                                                        "points"),
+    (None, "null", None, None), ([1, 2], "list", None, [1, 2]),
+])
+def test_valid_values_come_back_normalised(value, kind, bounds, want) -> None:
+    got = check_setting("s.k", value, kind, bounds)
+    assert got == want and type(got) is type(want)
+
+
+@pytest.mark.parametrize(("value", "kind", "bounds", "words"), [
+    (2.5, "int", (1, 16), "must be an integer within 1..16"), ("8", "int", (1, 16), "must be an integer"),
+    (True, "int", None, "must be an integer"), (math.nan, "float", (0, 1), "must be a finite number within 0..1"),
+    (math.inf, "float", None, "must be a finite number"), ("1.5", "float", None, "must be a finite number"),
+    (1, "bool", None, "must be true or false"), ("maybe", "bool", None, "must be true or false"),
+    (5, "str", None, "must be a string"),
+    (0, "int", (1, 16), "must be within 1..16, got 0"), (7, "float", (0.1, 1.0), "must be within 0.1..1.0"),
+])
+def test_wrong_types_and_ranges_name_the_field(value, kind, bounds, words) -> None:
+    with pytest.raises(SpecError, match="config s.k " + words.replace(".", r"\.")) as info:
+        check_setting("s.k", value, kind, bounds)
+    assert info.value.detail["field"] == "s.k" and isinstance(info.value, VtdError)
+    if bounds is not None:
+        assert (info.value.detail["min"], info.value.detail["max"]) == bounds
+
+
+def test_pairs_below_and_at_most() -> None:
+    check_pair("below", "a.lo", 1, "a.hi", 2)
+    check_pair("at_most", "a.lo", 2, "a.hi", 2)
+    with pytest.raises(SpecError, match=r"a\.lo \(2\) must be below a\.hi \(2\)") as info:
+        check_pair("below", "a.lo", 2, "a.hi", 2)
+    assert info.value.detail == {"field": "a.lo", "fields": ["a.lo", "a.hi"], "values": [2, 2]}
+    with pytest.raises(SpecError, match="must be at most"):
+        check_pair("at_most", "a.lo", 3, "a.hi", 2)
+
+
+def test_kind_of_a_default() -> None:
+    assert [kind_of(v) for v in (True, 1, 1.0, "x", None, (1,))] == ["bool", "int", "float", "str", "any", "any"]
+
+
+@pytest.mark.parametrize("bad", [
+    {"features.n_levels": 0}, {"features": {"n_levels": "8"}}, {"dense.enabled": 1}, {"dense.method": 3},
+    {"features.min_depth_m": 7.0}, {"tracking": {"nonsense": 1}},
+])
+def test_api_and_worker_refuse_the_same_configs_with_the_same_message(bad) -> None:
+    with pytest.raises(InvalidInput) as api:
+        check_ranges(bad)
+    with pytest.raises(ConfigError) as worker:
+        PipelineConfig().with_overrides(bad)
+    assert isinstance(api.value.__cause__, SpecError) or "unknown" in api.value.message
+    if "unknown" not in api.value.message:
+        assert api.value.message == worker.value.message
+
+
+def test_the_published_defaults_pass() -> None:
+    ranges = settings_ranges()
+    check_config({key: spec["default"] for key, spec in ranges.items()})
+    assert PipelineConfig().with_overrides({"dense.enabled": "false"}).to_dict()["dense"]["enabled"] is False
