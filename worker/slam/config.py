@@ -40,9 +40,8 @@ class FeatureConfig:
     n_levels: int = valid(8, 1, 16)
     """Pyramid levels."""
     overdetect: int = valid(3, 1, 50)
-    """Corners detected per kept keypoint before the grid balances them (ORB keeps the strongest
-    `overdetect x n_features` first). More helped the synthetic proxies but lost on real footage, so 3.
-    Measured: docs/results/settings.md#features-overdetect"""
+    """Corners detected per kept keypoint before the grid balances them; more helped the synthetic proxies but
+    lost on real footage. Measured: docs/results/settings.md#features-overdetect"""
     fast_threshold: int = valid(10, 1, 255)
     """FAST threshold; low, so weakly textured grid cells still get corners (the grid keeps the best)."""
     grid_cell_px: int = valid(40, 4, 1_024)
@@ -68,9 +67,9 @@ class TrackingConfig:
     min_matches: int = valid(30, 4, 100_000)
     """Fewer inliers than this after pose optimisation means tracking is lost."""
     virtual_baseline_m: float = valid(0.08, 0.0001, 10.0)
-    """Virtual stereo baseline that turns depth into a third (right-image) reprojection residual; it sets
-    how much keypoint depth weighs in pose optimisation: ORB-SLAM2's ~0.08 (TUM), for cameras whose depth is
-    registered to colour (`Camera.depth_registered`). Measured: docs/results/settings.md#tracking-virtual_baseline_m"""
+    """Virtual stereo baseline of the depth (right-image) residual, i.e. how much keypoint depth weighs in pose
+    optimisation: ORB-SLAM2's ~0.08 (TUM), for cameras whose depth is registered to colour
+    (`Camera.depth_registered`). Measured: docs/results/settings.md#tracking-virtual_baseline_m"""
     unregistered_baseline_m: float = valid(0.01, 0.0001, 10.0)
     """The same for cameras whose depth is not registered to colour (7-Scenes): a keypoint's depth may belong
     to a neighbouring surface, so it weighs less. Measured: docs/results/settings.md#tracking-unregistered_baseline_m"""
@@ -81,19 +80,17 @@ class TrackingConfig:
     ba_iterations: int = valid(8, 1, 1_000)
     """Gauss-Newton iterations per round."""
     established_frames: int = valid(10, 0, 100_000)
-    """Each pose is also solved with every match weighted by how established its map point is: matched in n
-    frames, weight min(n / N, 1), at least 1 / N. That pose replaces the plain one when they differ by more than
-    `established_disagree_m` (people walking together outnumbering the static matches drag the plain solve;
-    points that kept still for many frames do not move with them). 0 = off.
+    """Each pose is also solved with every match weighted by how established its map point is (matched in n
+    frames: weight min(n / N, 1), at least 1 / N), and replaced by that solve when they differ by more than
+    `established_disagree_m`: people walking together drag the plain solve, long-still points do not. 0 = off.
     Measured: docs/results/settings.md#tracking-established_frames"""
     established_disagree_m: float = valid(0.01, 0.0, 10.0)
     """Translation between the plain and the weighted pose beyond which the weighted one is taken."""
     rescue_with_held_back: bool = True
-    """A frame that cannot be tracked on the keypoints culling kept is tracked again with the ones it held back
-    added (segmentation marking most of the view leaves too few); of those, only the ones matched to map points
-    as inliers stay with the frame, so the map's established static points decide which marked parts are
-    static, and unmatched keypoints on people never become map points. A first frame whose kept keypoints
-    cannot start a map starts it on all of them (nothing to judge them by yet). Counted as `rescued_frames`.
+    """A frame that cannot be tracked on the keypoints culling kept (segmentation marking most of the view) is
+    tracked again with the held-back ones added; of those only the map points' inliers stay, so the map's
+    established static points decide which marked parts are static. A first frame whose kept keypoints cannot
+    start a map starts it on all of them. Counted as `rescued_frames`.
     Measured: docs/results/settings.md#tracking-rescue_with_held_back"""
     retry_from_last_pose: bool = True
     """A frame that cannot be tracked from the constant-velocity prediction (held-back keypoints included) is
@@ -163,10 +160,9 @@ class MappingConfig:
     global_ba_iterations: int = valid(10, 0, 1_000)
     """Levenberg-Marquardt iterations of the final global BA."""
     refit_frames: bool = True
-    """At the end, re-solve every tracked non-keyframe frame's pose by motion-only BA against the final
-    positions of the map points it matched (`mapping/frame_refit.py`): its stored pose keeps the error of the
-    points as they were when it was tracked. Keeps ~6 kB per frame until the end.
-    Measured: docs/results/settings.md#mapping-refit_frames"""
+    """At the end, re-solve every tracked non-keyframe frame's pose by motion-only BA against the final map
+    points it matched (`mapping/frame_refit.py`), not the points as they were when it was tracked. Keeps ~6 kB
+    per frame until the end. Measured: docs/results/settings.md#mapping-refit_frames"""
 
 
 @dataclass
@@ -206,9 +202,8 @@ class DenseConfig:
     """Drop map points that other frames' measured depth sees through: what was there only for a while, e.g. a
     person segmentation missed (`worker.slam.mapping.carve`). Measured: docs/results/settings.md#dense-carve"""
     carve_every: int = valid(3, 0, 1000)
-    """Every n-th tracked frame's measured depth votes in carving, at its final pose (0: the keyframes only):
-    the frames between keyframes see behind people that few keyframes do.
-    Measured: docs/results/settings.md#dense-carve_every"""
+    """Every n-th tracked frame's depth votes in carving at its final pose (0: the keyframes only): frames
+    between keyframes see behind people. Measured: docs/results/settings.md#dense-carve_every"""
     carve_max_views: int = valid(1000, 1, 100_000)
     """At most this many frames kept for carving (77 kB each at 640x480, stride 4); a longer run thins them."""
     carve_min_through: int = valid(3, 1, 1000)
