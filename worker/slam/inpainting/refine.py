@@ -33,8 +33,8 @@ class PoseRefinementConfig:
 
     enabled: bool = False
     """Off by default: with the tracker's poses (consistent with the images) it gains little and doubles the
-    restoration's time; with external poses a few pixels off it gains. Measured:
-    docs/results/settings.md#restoration-refine"""
+    restoration's time; with external poses a few pixels off it gains.
+    Measured: docs/results/settings.md#restoration-refine"""
     scale: float = valid(0.5, 0.125, 1.0)
     """Image scale the alignment runs at (0.5: half resolution)."""
     min_static_fraction: float = valid(0.1, 0.0, 1.0)
