@@ -42,12 +42,8 @@ class FeatureConfig:
     n_levels: int = valid(8, 1, 16)
     """Pyramid levels."""
     overdetect: int = valid(3, 1, 50)
-    """Corners detected per kept keypoint before the grid balances them: ORB keeps the strongest
-    `overdetect x n_features` first, so a textured object can leave plain cells without candidates. 6 gave the
-    plain kitchen around augmented seed 7's textured person 2x the keypoints and the development means
-    `no-restoration` 0.0262 -> 0.0244, `geometry-only` 0.1145 -> 0.0539, `orb-only` 0.2354 -> 0.1451 m, but on
-    real footage it lost: Bonn means `geometry-only` 0.0282 -> 0.0689, `orb-only` 0.0440 -> 0.1039, static
-    7-Scenes 1000 frames 0.0402 -> 0.0421 (docs/results/segmentation.md, "Over-detection"). 3 stays."""
+    """Corners detected per kept keypoint before the grid balances them; more helped the synthetic proxies but
+    lost on real footage. Measured: docs/results/settings.md#features-overdetect"""
     fast_threshold: int = valid(10, 1, 255)
     """FAST threshold; low, so weakly textured grid cells still get corners (the grid keeps the best)."""
     grid_cell_px: int = valid(40, 4, 1_024)
@@ -73,13 +69,12 @@ class TrackingConfig:
     min_matches: int = valid(30, 4, 100_000)
     """Fewer inliers than this after pose optimisation means tracking is lost."""
     virtual_baseline_m: float = valid(0.08, 0.0001, 10.0)
-    """Virtual stereo baseline that turns depth into a third (right-image) reprojection residual; it sets
-    how much keypoint depth weighs in pose optimisation: ORB-SLAM2's ~0.08 (TUM), for cameras whose depth is
-    registered to colour (`Camera.depth_registered`). On the synthetic rooms it halves the ATE against 0.01
-    (docs/results/settings.md)."""
+    """Virtual stereo baseline of the depth (right-image) residual, i.e. how much keypoint depth weighs in pose
+    optimisation: ORB-SLAM2's ~0.08 (TUM), for cameras whose depth is registered to colour
+    (`Camera.depth_registered`). Measured: docs/results/settings.md#tracking-virtual_baseline_m"""
     unregistered_baseline_m: float = valid(0.01, 0.0001, 10.0)
     """The same for cameras whose depth is not registered to colour (7-Scenes): a keypoint's depth may belong
-    to a neighbouring surface, so it weighs less (static 7-Scenes: 0.0224 m here against 0.0260 at 0.08)."""
+    to a neighbouring surface, so it weighs less. Measured: docs/results/settings.md#tracking-unregistered_baseline_m"""
     huber_px: float = valid(2.45, 0.01, 1000.0)
     """Huber threshold (pixels) of the robust kernel, sqrt of the 2-dof 95% chi-square (5.99)."""
     ba_rounds: int = valid(4, 1, 100)
@@ -87,18 +82,18 @@ class TrackingConfig:
     ba_iterations: int = valid(8, 1, 1_000)
     """Gauss-Newton iterations per round."""
     established_frames: int = valid(10, 0, 100_000)
-    """Each pose is also solved with every match weighted by how established its map point is: matched in n
-    frames, weight min(n / N, 1), at least 1 / N. That pose replaces the plain one when they differ by more than
-    `established_disagree_m` (people walking together outnumbering the static matches drag the plain solve;
-    points that kept still for many frames do not move with them). 0 = off (docs/results/settings.md)."""
+    """Each pose is also solved with every match weighted by how established its map point is (matched in n
+    frames: weight min(n / N, 1), at least 1 / N), and replaced by that solve when they differ by more than
+    `established_disagree_m`: people walking together drag the plain solve, long-still points do not. 0 = off.
+    Measured: docs/results/settings.md#tracking-established_frames"""
     established_disagree_m: float = valid(0.01, 0.0, 10.0)
     """Translation between the plain and the weighted pose beyond which the weighted one is taken."""
     rescue_with_held_back: bool = True
-    """A frame that cannot be tracked on the keypoints culling kept is tracked again with the ones it held back
-    added (segmentation marking most of the view leaves too few); of those, only the ones matched to map points
-    as inliers stay with the frame, so the map's established static points decide which marked parts are
-    static, and unmatched keypoints on people never become map points. A first frame whose kept keypoints
-    cannot start a map starts it on all of them (nothing to judge them by yet). Counted as `rescued_frames`."""
+    """A frame that cannot be tracked on the keypoints culling kept (segmentation marking most of the view) is
+    tracked again with the held-back ones added; of those only the map points' inliers stay, so the map's
+    established static points decide which marked parts are static. A first frame whose kept keypoints cannot
+    start a map starts it on all of them. Counted as `rescued_frames`.
+    Measured: docs/results/settings.md#tracking-rescue_with_held_back"""
     retry_from_last_pose: bool = True
     """A frame that cannot be tracked from the constant-velocity prediction (held-back keypoints included) is
     tracked again from the last frame's pose before relocalisation, as ORB-SLAM falls back from its motion
@@ -123,7 +118,7 @@ class TrackingConfig:
     init_min_points: int = valid(150, 4, 100_000)
     """A map starts (first keyframe, or a new map after a loss) only on a frame whose depth gives at least
     this many new map points: 5x `min_matches`, since culling removes many new points (ORB-SLAM2 waits for
-    500 keypoints); a start on fewer left 59 of 60 frames of a masked synthetic sequence lost."""
+    500 keypoints). Measured: docs/results/settings.md#tracking-init_min_points"""
     new_map_after_lost: int = valid(1, 1, 100_000)
     """Consecutive frames that neither track nor relocalise before a new map starts at the motion model's
     pose (constant-velocity bridge: same world frame, no shared points until a loop connects them)."""
@@ -150,14 +145,14 @@ class MappingConfig:
     """New map points are created from keyframe depth up to this distance."""
     triangulate_neighbours: int = valid(0, 0, 1_000)
     """Covisible keyframes each new keyframe triangulates new points with, for keypoints that got none from
-    depth (no depth, or beyond `new_point_max_depth_m`); 0 turns triangulation off."""
+    depth (no depth, or beyond `new_point_max_depth_m`); 0 turns triangulation off, the default: it helped the
+    proxies and hurt real footage. Measured: docs/results/settings.md#mapping-triangulate_neighbours"""
     triangulate_min_parallax_deg: float = valid(1.0, 0.0, 90.0)
     """Smallest angle between the two viewing rays of a triangulated point."""
     fuse_neighbours: int = valid(0, 0, 1_000)
     """Covisible keyframes each new keyframe fuses map points with (ORB-SLAM2's SearchInNeighbors with 10: a
-    keypoint matched to a neighbour's point gains the observation); 0 turns it off. Off: with 10 (or 5) the
-    development means of `geometry-only` fell 50 % (19 %) but `orb-only`'s rose 7 % (4 %), which the rule
-    written before measuring did not allow (docs/results/dynamic.md, "Map-point fusion")."""
+    keypoint matched to a neighbour's point gains the observation); 0 turns it off. Off: it helped one preset
+    and hurt another. Measured: docs/results/settings.md#mapping-fuse_neighbours"""
     fuse_radius_px: float = valid(3.0, 0.5, 100.0)
     """Search radius of fusion at octave 0 (grows with the octave's scale)."""
     fuse_merge: bool = False
@@ -167,9 +162,9 @@ class MappingConfig:
     global_ba_iterations: int = valid(10, 0, 1_000)
     """Levenberg-Marquardt iterations of the final global BA."""
     refit_frames: bool = True
-    """At the end, re-solve every tracked non-keyframe frame's pose by motion-only BA against the final
-    positions of the map points it matched (`mapping/frame_refit.py`): its stored pose keeps the error of the
-    points as they were when it was tracked. Keeps ~6 kB per frame until the end."""
+    """At the end, re-solve every tracked non-keyframe frame's pose by motion-only BA against the final map
+    points it matched (`mapping/frame_refit.py`), not the points as they were when it was tracked. Keeps ~6 kB
+    per frame until the end. Measured: docs/results/settings.md#mapping-refit_frames"""
 
 
 @dataclass
@@ -207,18 +202,18 @@ class DenseConfig:
     """TSDF truncation band in voxels (`method: tsdf`)."""
     carve: bool = True
     """Drop map points that other frames' measured depth sees through: what was there only for a while, e.g. a
-    person segmentation missed (`worker.slam.mapping.carve`; docs/results/dense-map.md, for why it is on)."""
+    person segmentation missed (`worker.slam.mapping.carve`). Measured: docs/results/settings.md#dense-carve"""
     carve_every: int = valid(3, 0, 1000)
-    """Every n-th tracked frame's measured depth votes in carving, at its final pose (0: the keyframes only):
-    the frames between keyframes see behind people that few keyframes do (docs/results/dense-map.md)."""
+    """Every n-th tracked frame's depth votes in carving at its final pose (0: the keyframes only): frames
+    between keyframes see behind people. Measured: docs/results/settings.md#dense-carve_every"""
     carve_max_views: int = valid(1000, 1, 100_000)
     """At most this many frames kept for carving (77 kB each at 640x480, stride 4); a longer run thins them."""
     carve_min_through: int = valid(3, 1, 1000)
     """Views that must see through a point before it is dropped (one is not enough: a single bad depth frame
     or pose would carve static surfaces)."""
     carve_majority: bool = False
-    """Also require that the point was seen through more often than seen (the rule until 2026-12-04): keeps
-    people who stay in view for many keyframes, so off (docs/results/dense-map.md)."""
+    """Also require that the point was seen through more often than seen (the earlier rule): keeps people who
+    stay in view for many keyframes, so off. Measured: docs/results/settings.md#dense-carve_majority"""
 
 
 @dataclass

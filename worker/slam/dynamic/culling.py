@@ -51,16 +51,13 @@ class CullingConfig:
     ransac_px: float = valid(1.0, 0.01, 100.0)
     """RANSAC inlier threshold of the fundamental matrix (pixels)."""
     usac: bool = False
-    """F's RANSAC and the depth test's PnP-RANSAC fallback by OpenCV's USAC instead of classic RANSAC: the
-    slowest frames' culling 3x cheaper (Bonn mean 7.2 -> 5.3 ms), but worse `geometry-only` and Bonn ATE, so
-    off (docs/results/realtime.md, 2026-12-04)."""
+    """F's RANSAC and the depth test's PnP-RANSAC fallback by OpenCV's USAC instead of classic RANSAC: cheaper
+    on the slowest frames but less accurate, so off. Measured: docs/results/settings.md#culling-usac"""
     seed_fundamental: float = valid(0.5, 0.0, 1.0)
     """When the depth test has its pose, F is fitted by least squares to the static matches that pose's own F
     explains within `ransac_px` (`epipolar.fundamental_from_seed`), if at least this fraction of them do;
-    else, and without a pose, by RANSAC (1 = always RANSAC). The pose plays RANSAC's best hypothesis: 0.6 ms
-    instead of 1.5 per Bonn frame on average, RANSAC included where the seed explains too little (8 % of the
-    frames); the same ATE means over the development sequences (docs/results/realtime.md, "Culling at half the
-    cost")."""
+    else, and without a pose, by RANSAC (1 = always RANSAC). The pose plays RANSAC's best hypothesis: cheaper,
+    the same accuracy. Measured: docs/results/settings.md#culling-seed_fundamental"""
     fit_max_points: int = valid(200, 8, 100_000)
     """The depth test's pose is fitted on at most this many static matches (evenly picked): with mostly
     inliers more points make RANSAC slower, not the pose better; every match is then scored. (F keeps all
@@ -78,15 +75,13 @@ class CullingConfig:
     prefer_static_within: int = valid(20, 0, 256)
     """An object keypoint's brute-force match gives way to its guided match (a previous keypoint near where the
     prediction puts it if static) when that one's Hamming distance is at most this much larger (-1 = never):
-    exhaustive matching picks the best descriptor anywhere near the objects, on repeated texture (kitchen
-    cabinets) sometimes a wrong match far away. A modest gain on the means that touches few matches; guided
-    matching of every object keypoint first instead lost tracking (docs/results/dynamic.md, "Ambiguous matches on
-    objects")."""
+    on repeated texture exhaustive matching sometimes picks a wrong match far away.
+    Measured: docs/results/settings.md#culling-prefer_static_within"""
     confirm_on_objects: bool = True
     """When too few keypoints outside the segments match the prediction, count the guided matches of all
     keypoints instead. Segmentation that marks most of the view (MSNET on the synthetic room) otherwise leaves
     the prediction unconfirmed, so the prediction veto is off exactly when F, fitted on the few points left
-    outside, is least reliable (docs/results/dynamic.md, "The prediction under masks that cover the view")."""
+    outside, is least reliable. Measured: docs/results/settings.md#culling-confirm_on_objects"""
     use_depth: bool = True
     """Add the reprojection test with the previous frame's depth."""
     pnp_px: float = valid(2.0, 0.01, 100.0)
@@ -96,15 +91,13 @@ class CullingConfig:
     (within `pnp_px`): the predicted pose refined (no RANSAC) when it passes, else (with segments) PnP-RANSAC's
     pose when that passes. With segments and without a pose, a frame whose prediction guided matching did not
     confirm cannot be judged (see `undecided_dynamic`): its brute-force matches hold no motion most static
-    points agree on (on Bonn: motion blur behind people who fill the view, where RANSAC's best pose had 0-30 %
-    support, and every segment came out dynamic anyway), and fitting F to them cost 5-10 ms for scores nothing
+    points agree on (people filling a motion-blurred view), so fitting F to them cost time for scores nothing
     relied on. Without segments (`geometry-only`) the matches include every mover, so a pose's support says
-    less, and any RANSAC pose is used as before."""
+    less, and any RANSAC pose is used as before. Measured: docs/results/settings.md#culling-min_pose_support"""
     ap3p_samples: bool = True
     """With segments, PnP-RANSAC's hypotheses by AP3P on 4 points, then SQPnP on the consensus
-    (`pnp.sqpnp_ransac`): 3.6 ms instead of 11.5 for its 300 hypotheses on a Bonn frame. (`geometry-only`,
-    which needs RANSAC on every frame, keeps SQPnP's samples: the change moved its development ATEs by up to 3x
-    per sequence either way, docs/results/realtime.md "Culling without its tail".)"""
+    (`pnp.sqpnp_ransac`): about 3x cheaper. `geometry-only`, which needs RANSAC on every frame, keeps SQPnP's
+    samples (the change moved its ATEs both ways). Measured: docs/results/settings.md#culling-ap3p_samples"""
     reprojection_scale: float = valid(3.0, 0.01, 100.0)
     """A reprojection error counts as `error / scale` epipolar pixels (depth noise is larger than keypoint noise)."""
     prediction_veto: bool = True
@@ -113,26 +106,24 @@ class CullingConfig:
     depth test's pose are fitted on the matches outside the segments, and when segmentation marks most of the
     static view and misses part of a person (MSNET: floor, chairs, red cabinets), that outside set is mostly
     the person; the whole static scene then looks moving and tracking is lost. Where segmentation is right the
-    veto can only keep slow movers, so it trades a little there for not losing whole sequences (docs/results/dynamic.md,
-    "Prediction veto")."""
+    veto can only keep slow movers, so it trades a little there for not losing whole sequences.
+    Measured: docs/results/settings.md#culling-prediction_veto"""
     refine_prediction_below: float = valid(0.2, 0.0, 1.0)
     """When fewer than this fraction of the matches lie outside the segments, the prediction veto uses the
-    predicted pose refined on all matched points (`_refine_from`: LM from the prediction on the points it
-    explains, gates of 3 and 1 x `pnp_px`; a wide first gate let a mover pull the pose along) instead of the raw
-    constant-velocity prediction (0 = never). There F and the depth pose, fitted on the few matches outside,
-    are weak and the veto decides, and a prediction a few pixels off makes the whole static view look moving.
-    Not always: an exact pose lets the veto keep slow movers (docs/results/dynamic.md, "The prediction under masks
-    that cover the view")."""
+    predicted pose refined on all matched points (`relative_pose.refine_from`: LM from the prediction on the
+    points it explains, gates of 3 and 1 x `pnp_px`) instead of the raw constant-velocity prediction (0 =
+    never). There F and the depth pose, fitted on the few matches outside, are weak and the veto decides, and a
+    prediction a few pixels off makes the whole static view look moving.
+    Measured: docs/results/settings.md#culling-refine_prediction_below"""
     min_points: int = valid(3, 1, 100_000)
     """A segment needs this many matched points to be judged by geometry."""
     judge_marks_above: float = valid(0.0, 0.0, 1.0)
     """> 0: geometry judges the marked segments only in frames where segmentation marks more than this share of
     the view; below it every marked segment is excluded unjudged and nothing is matched
     (`CullingResult.marks_trusted`): a person who looks still over `lag_frames` is often starting or ending a
-    walk. 0 (the default) = the paper: every mark is judged. 0.5 was measured (docs/results/dynamic.md, "Marks
-    judged only where they cover most of the view"): development mean 0.0250 -> 0.0242 m and the true-mask
-    oracle 0.0261 -> 0.0254, but the synthetic rooms 0.0076 -> 0.0078, so it stays an option. 1 = never judge:
-    frames whose marks cover 90 % of the view then starve (40 of 60 tracked in the test of that name)."""
+    walk. 0 (the default) = the paper: every mark is judged; 0.5 helped the development means but not the
+    synthetic rooms, so it stays an option. 1 = never judge: frames whose marks cover most of the view starve.
+    Measured: docs/results/settings.md#culling-judge_marks_above"""
     undecided_dynamic: bool = True
     """A potentially dynamic segment with too few matched points to judge, or in a frame that cannot be judged
     (`min_pose_support`), is treated as dynamic (safe side: a person's features rarely match across frames when
@@ -145,7 +136,7 @@ class CullingConfig:
     segment_step: int = valid(2, 1, 8)
     """Segments are split on every `segment_step`-th row and column and their labels spread back to the mask's
     pixels (`segments.split_segments`): a quarter of the work at 2, the costliest part of culling where
-    segmentation marks half the view (MSNET on Bonn: 4.3 ms per frame at 1). The networks' masks are
+    segmentation marks half the view (docs/results/settings.md#culling-segment_step). The networks' masks are
     upsampled bilinearly from 256x192 (MSNET, with `segmenter.guided_radius` 0, the default) or 257x257 (the
     teacher), so 2 px blocks lose none of their detail; the decisions are made on keypoints and 8 px cells,
     and the exclusion band is wider than a block."""
@@ -157,8 +148,8 @@ class CullingConfig:
     grow_px: int = valid(0, 0, 256)
     """A dynamic segment is extended by up to this many pixels along its own surface (depth), to cover what
     segmentation missed (0 = off); see `segments.grow_by_depth`. Off: it lifts recall with MSNET, but where
-    MSNET marks most of the view it spreads the false positives along the floor and tracking is lost
-    (docs/results/dynamic.md, "Tried and not on")."""
+    MSNET marks most of the view it spreads the false positives along the floor and tracking is lost.
+    Measured: docs/results/settings.md#culling-grow_px"""
     grow_rel_depth: float = valid(0.15, 0.0, 10.0)
     """Relative depth tolerance of that growth around the segment's median depth."""
     local_px: float = valid(48.0, 1.0, 4096.0)
@@ -173,13 +164,12 @@ class CullingConfig:
     """Local decisions are made on a grid of this spacing and spread to its cells."""
     dilation_px: int = valid(3, 0, 256)
     """The exclude mask is the dynamic mask dilated by this many pixels (a keypoint on the silhouette describes a
-    patch that moves with the object). With true masks a band of half the ORB patch is best, but MSNET's masks
-    already spill past people and a wider band starved tracking, hence the narrow default. With the 2026-12-04
-    MSNET 15 px helps the augmented proxies (-17 % mean ATE) but costs the real Bonn frames 14 %
-    (docs/results/dynamic.md, the exclusion-band tables)."""
+    patch that moves with the object). Narrow: MSNET's masks already spill past people, and a wider band helps
+    the augmented proxies but costs real footage. Measured: docs/results/settings.md#culling-dilation_px"""
     cluster_dilation_px: int = valid(3, 0, 256)
     """The same for the geometric clusters, whose regions are already whole grid cells wide (a wider band
-    there removed static features and cost `geometry-only` accuracy on static 7-Scenes)."""
+    there removed static features and cost `geometry-only` accuracy on static 7-Scenes).
+    Measured: docs/results/settings.md#culling-cluster_dilation_px"""
 
 
 @dataclass(frozen=True)

@@ -43,8 +43,7 @@ class ThresholdConfig:
     """A fixed threshold instead (for the ablation); None = adaptive."""
     mode: str = "frame"
     """`frame` (H of the camera's pose) or `object` (H of each segment's motion; see the module doc). `frame` by
-    default: `object` was worse on the means of the synthetic room and two augmented seeds (ATE 0.0301 vs
-    0.0224 m, same precision/recall; docs/results/dynamic.md, "Per-object threshold")."""
+    default: `object` was less accurate. Measured: docs/results/settings.md#culling-threshold-mode"""
     object_h0: float = valid(-26.0, -1000.0, 1000.0)
     """Midpoint (nats) of f for a 6-DoF object motion in `object` mode: the entropy of a board's motion from
     ~40 matched points with 0.5 px residuals on the test scene (150 points: -29, 10 points: -24)."""

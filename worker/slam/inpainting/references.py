@@ -23,9 +23,8 @@ class ReferenceSelectionConfig:
     the near ones: a hole pixel takes the first references that see it (`blend_refs` of them), so they fill
     pixels no near reference sees (a person who lingers hides some background from every frame within +-15) and
     join the average only where a single near one does. Far frames warp worse (pose and colour/depth
-    registration errors grow with the baseline), so as *first* choices they cost 1.1 dB on the augmented frames;
-    as second chances, 2 of them within +-30 frames gave +1.0 dB on the synthetic room (27.80 -> 28.83) and +0.05
-    to +0.46 dB on augmented seeds 0-3 (docs/results/restoration.md). 0: none."""
+    registration errors grow with the baseline), so they come second, never first. 0: none.
+    Measured: docs/results/settings.md#restoration-far_refs"""
     min_match_ratio: float = valid(0.15, 0.0, 1.0)
     """Information test: ORB matches with the target / target's features."""
     min_translation_m: float = valid(0.01, 0.0001, 10.0)

@@ -3,12 +3,13 @@
 Geometry copies a reference pixel to where the two poses and the reference's depth put it. Poses from a
 motion-capture or KinectFusion ground truth, or from feature tracking, are a centimetre or a degree off the
 images, and 7-Scenes' depth comes from a second, unregistered camera: copied texture lands a few pixels away
-from where the target would show it (the ring-shift alignment, `align.py`, measured 1-8 px on augmented
+from where the target would show it (the ring-shift alignment, `align.py`, finds a few pixels on augmented
 frames, varying across the hole). A rigid correction of the relative pose fits all of it at once, parallax
 included: the reference is rendered at its current relative pose into the target view (`warp.render_depth`),
 and OpenCV's photometric RGB-D odometry (`cv2.Odometry`, RGB type: the reference's depth, both images'
 intensities; Steinbruecker et al.) aligns that rendering with the target's static pixels, at half resolution.
-An option, off by default: it pays where poses come from elsewhere, not from the tracker (docs/results/restoration.md).
+An option, off by default: it pays where poses come from elsewhere, not from the tracker
+(docs/results/settings.md#restoration-refine).
 """
 from __future__ import annotations
 
@@ -31,11 +32,9 @@ class PoseRefinementConfig:
     """Photometric refinement of each reference's relative pose before restoration."""
 
     enabled: bool = False
-    """Off by default: with the tracker's poses (consistent with the images they were estimated from) the
-    pipeline's restored keyframes gained 0.08 dB on the augmented sequences, and the alignment costs ~14 ms per
-    reference at half scale (a 15 % hole with three references 32 -> 68-71 ms on an augmented frame, above the
-    50 ms budget); with external poses a few pixels off (7-Scenes' ground truth) it gains 1.7 dB
-    (docs/results/restoration.md)."""
+    """Off by default: with the tracker's poses (consistent with the images) it gains little and doubles the
+    restoration's time; with external poses a few pixels off it gains.
+    Measured: docs/results/settings.md#restoration-refine"""
     scale: float = valid(0.5, 0.125, 1.0)
     """Image scale the alignment runs at (0.5: half resolution)."""
     min_static_fraction: float = valid(0.1, 0.0, 1.0)
@@ -49,9 +48,8 @@ class PoseRefinementConfig:
     check_ring_px: int = valid(30, 1, 200)
     """A refined pose is kept only if the static pixels within this distance of the hole correlate better
     with the reference through it than through the pose given (zero-normalised, grey): the alignment fits the
-    whole view, the hole's surroundings are what the copy has to match. On the synthetic room's exact poses it
-    rejects every correction; on 7-Scenes' ground truth it keeps 4.4-5.7 of 6 references per frame (ZNCC e.g.
-    0.60 -> 0.95, 0.91 -> 0.94)."""
+    whole view, the hole's surroundings are what the copy has to match.
+    Measured: docs/results/settings.md#restoration-refine"""
 
 
 class PoseRefiner:

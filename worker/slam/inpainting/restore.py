@@ -40,8 +40,8 @@ class RestorationConfig:
     fast-marching diffusion from the border) or "patchmatch" (the paper: texture copied from the references' and
     the frame's own static regions). The smooth fills invent no texture, hence no false ORB corners; against the
     true background copied look-alike texture scores worse than a smooth guess and costs a full-image search,
-    and harmonic beats Telea by 0.2-0.6 dB on real frames (docs/results/restoration.md). Geometry-seen
-    pixels are the same either way."""
+    and harmonic beats Telea. Geometry-seen pixels are the same either way.
+    Measured: docs/results/settings.md#restoration-unseen_fill"""
 
     def __post_init__(self) -> None:
         if self.unseen_fill not in UNSEEN_FILLS:
@@ -68,19 +68,15 @@ class RestorationConfig:
     pixels around the hole that the reference sees too: real cameras change exposure between frames."""
     align_px: int = valid(0, 0, 32)
     """> 0: each reference's colours are taken up to this many whole pixels away from where geometry puts them:
-    the shift that best matches the static ring around the hole (`align.ring_shift`; needs `subpixel`). With
-    7-Scenes' ground-truth poses, a few pixels off the images, 6 gains 0.6-2.1 dB on augmented frames
-    (`bench_inpainting.py`, true masks) and nothing on the exact synthetic room; in the pipeline, with the
-    tracker's poses (consistent with the images) and MSNET's masks (people partly outside the hole, so in the
-    ring), it changed the restored keyframes by -0.4 to 0.0 dB on the augmented seeds and the synthetic room:
-    off. For restorations with poses from elsewhere (docs/results/restoration.md)."""
+    the shift that best matches the static ring around the hole (`align.ring_shift`; needs `subpixel`). Off:
+    it pays with poses from elsewhere, a few pixels off the images, not with the tracker's (consistent with
+    them). Measured: docs/results/settings.md#restoration-align_px"""
     blend_refs: int = valid(2, 1, 16)
     """Hole pixels references see through geometry average the colours (each at its reference's gain) and the
     depths of up to this many of them, in reference order, each agreeing with the depth averaged so far within
     `blend_depth_tol`; 1 = the first (best) reference alone. Warps from two poses err differently (depth noise,
-    a pose a few pixels off), so their average is closer to the truth: 2 gained 0.2-0.8 dB of whole-hole PSNR and
-    0.1-0.2 cm of median depth error per sequence with true masks and poses, and 0.2-0.7 dB on the restored
-    keyframes in the pipeline (docs/results/restoration.md); 3 gained nothing more on augmented frames."""
+    a pose a few pixels off), so their average is closer to the truth; a third gained nothing more.
+    Measured: docs/results/settings.md#restoration-blend_refs"""
     blend_depth_tol: float = valid(0.05, 0.0, 10.0)
     """Relative depth difference within which a further reference joins a pixel's average (beyond it, it saw
     another surface)."""

@@ -50,9 +50,7 @@ class RestorationStageConfig:
     reference_margin_px: int = valid(8, 0, 100)
     """Each reference's moving pixels are widened by this many pixels before anything is copied from it: the
     segmentation's masks miss a person's fringe (hair, a hand, the outline of a coarse mask), and a reference
-    copies that fringe into the hole. On the development sequences (`full`, shipped MSNET) 8 raised the restored
-    keyframes' PSNR against the true background on all nine, mean 15.3 -> 15.8 dB (augmented), and lowered
-    their depth error 3.3 -> 2.8 cm; 16 gave 16.1 dB but 2.9 cm (docs/results/restoration.md). 0 = off."""
+    copies that fringe into the hole. 0 = off. Measured: docs/results/settings.md#restoration-reference_margin_px"""
     references: str = "both-sided"
     """Where reference frames come from: "both-sided" (the `window` frames before and after the target; for
     jobs, which have the whole sequence) or "causal" (only the frames before; for streaming input)."""
@@ -318,8 +316,8 @@ def _overlay(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 def _widen(mask: np.ndarray, px: int) -> np.ndarray:
     """`mask` (H, W) bool dilated by `px` pixels, a square (one separable pass). Not culling's
-    `dilate_disc`: inpainting may not import its floor, and a disc of radius 8 kept more of the fringe (restored
-    keyframes 0.1-0.2 dB lower on six of nine development sequences, one depth error 4.4 -> 5.2 cm)."""
+    `dilate_disc`: inpainting may not import its floor, and a disc of radius 8 kept more of the fringe
+    (docs/results/settings.md#restoration-reference_margin_px)."""
     if px <= 0 or not mask.any():
         return mask
     return cv2.dilate(mask.astype(np.uint8), np.ones((2 * px + 1, 2 * px + 1), np.uint8)) > 0

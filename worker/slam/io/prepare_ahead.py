@@ -2,8 +2,8 @@
 
 A stage's `prepare(frame)` (segmentation: the network's mask from the RGB) needs nothing from earlier frames,
 so it can run while the pipeline thread culls and tracks the frame before. The overlap is limited by the GIL:
-MSNET's forward pass releases it only in part (measured 2026-12-02: 33 ms alone, 147 ms next to a busy Python
-thread), so on two loaded cores no fps gain was seen (docs/results/realtime.md).
+MSNET's forward pass releases it only in part, so on two loaded cores no fps gain was seen
+(docs/results/realtime.md, "Pipelined worker: segmentation ahead, restoration on demand").
 One thread, fed in frame order: each result is what the pipeline thread
 would have computed (the same function on the same frame), and a model is never called by two threads at once.
 Each result comes with its compute time, so the pipeline reports the stage's cost and, apart from it, how long

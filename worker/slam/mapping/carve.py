@@ -90,8 +90,8 @@ def carve(xyz: np.ndarray, rgb: np.ndarray, views: list[View], K: np.ndarray, st
           rel_tol: float = 0.03, min_tol_m: float = 0.05, min_through: int = 3,
           majority: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The map `xyz` (M,3) float32 world points with colours `rgb` (M,3) uint8, less the points that at least
-    `min_through` views saw through (`majority`: and that were seen through more often than seen, the rule
-    until 2026-12-04, which kept a person who stayed in view for more keyframes than saw the place free).
+    `min_through` views saw through (`majority`: and that were seen through more often than seen, the earlier
+    rule, which kept a person who stayed in view for more keyframes than saw the place free).
     `K` 3x3 full-image intrinsics; each view's depth holds every `stride`-th pixel (pinhole: distortion is
     below the tolerance at this stride)."""
     if not views or len(xyz) == 0:

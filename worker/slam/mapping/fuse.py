@@ -6,7 +6,8 @@ keyframes together, covisibility stays weak and the keyframe rule's count of wel
 Fusion projects the new keyframe's points into its neighbours and theirs into it: a keypoint with no point
 gains the observation. ORB-SLAM2 also merges two points that land on one keypoint (the one more keyframes
 observe stays); here that is `merge`, off: on static 7-Scenes merging cost accuracy while adding observations
-alone helped. Fusion itself is off by default (`mapping.fuse_neighbours`; docs/results/dynamic.md, "Map-point fusion").
+alone helped. Fusion itself is off by default (`mapping.fuse_neighbours`;
+docs/results/settings.md#mapping-fuse_neighbours).
 """
 from __future__ import annotations
 

@@ -178,7 +178,7 @@ def presets() -> dict[str, TrainConfig]:
     cpu_tum = replace(cpu, time_budget_min=75.0, epochs=100, val_every=6, target_frames=(halfsphere,),
                       p_target=0.3, p_labelled=0.3, p_target_background=0.3, bn_extra_frames=(halfsphere,))
     # Fine-tuning a `cpu-tum` run at a lower peak lr with more composites of COCO people on 7-Scenes backgrounds.
-    # Measured (MODEL_CARD.md) and not shipped: COCO held-out person IoU 0.263 -> 0.372, walking_xyz 0.697 -> 0.549.
+    # Measured and not shipped: better on held-out COCO, worse on walking_xyz (MODEL_CARD.md).
     cpu_tum_ft = replace(cpu_tum, time_budget_min=45.0, lr=5e-4, warmup_fraction=0.02, seed=1, p_target=0.25,
                          p_labelled=0.25, p_target_background=0.25, p_distractor_paste=0.3)
     # Real people at scale (issue 20): CCP (hash split) and COCO128 labelled samples, their full-body cut-outs
@@ -195,7 +195,7 @@ def presets() -> dict[str, TrainConfig]:
                        cache_dir="/tmp/msnet_cache_real")
     # Fine-tuning a `cpu-real` run (`--init` its msnet.pt) with the TUM walking_halfsphere frames distilled as in
     # `cpu-tum`: the `cpu-real` run found no one on walking_xyz and few of the synthetic room's people
-    # (MODEL_CARD.md, 2026-12-03).
+    # (MODEL_CARD.md).
     cpu_real_tum_ft = replace(cpu_real, time_budget_min=30.0, lr=5e-4, warmup_fraction=0.02, seed=1,
                               target_frames=(halfsphere,), p_target=0.25, p_labelled=0.35, p_target_background=0.3,
                               bn_extra_frames=(halfsphere,))
@@ -206,7 +206,7 @@ def presets() -> dict[str, TrainConfig]:
                             init_pretrained=cpu.teacher, pretrained_lr_scale=0.2)
     # Fine-tuning a `cpu-real-mnv2` run (`--init` its msnet.pt) with the person-free labelled photos (COCO128's
     # animals, furniture, streets) drawn 4x as often, for its held-out COCO errors on animal photos. Measured
-    # (MODEL_CARD.md) and not shipped: COCO held-out 0.443 -> 0.417 (the cat and elephants less, teddy bears more).
+    # and not shipped: held-out COCO slightly worse (MODEL_CARD.md).
     cpu_real_mnv2_neg = replace(cpu_real_mnv2, time_budget_min=35.0, lr=3e-4, warmup_fraction=0.02, seed=1,
                                 init_pretrained=None, person_free_weight=4.0)
     return {
