@@ -34,22 +34,18 @@ class CullingStageConfig:
     lag_frames: int = valid(10, 1, 1_000)
     """Compare with the frame this many frames back (the previous one at the start). Slow movers are the hard
     case: between consecutive frames a walking person's points move barely more than static points' noise, so
-    a longer baseline separates them."""
+    a longer baseline separates them. Measured: docs/results/settings.md#culling-lag_frames"""
     min_kept_features: int = valid(0, 0, 100_000)
     """When culling would leave the tracker fewer features than this, keypoints in the exclusion band (near,
     not on, dynamic objects) are given back in the extractor's order (counted as `features_readmitted`). It
     rescues a wide band (`dilation_px` 15); with the narrow default band it was mixed and hurt `geometry-only`,
-    so it is off. 0 = off."""
+    so it is off. 0 = off. Measured: docs/results/settings.md#culling-min_kept_features"""
     refill_below: float = valid(0.5, 0.0, 1.0)
     """When culling leaves fewer than this share of `features.n_features`, the frame's keypoints are extracted
-    again outside the exclusion mask and replace the kept ones (counted as `frames_refilled`). ORB keeps the
-    image's strongest corners before the grid spreads them, so a textured person can take 80-90 % of a frame's
-    budget and leave the pale room around it a hundred keypoints; extracted alone, the room gives the full
-    budget. Only frames culling compared (not the first) and only with segmentation: `geometry-only`'s
-    exclusion is culling's alone, and refilling around it cost its development mean 0.1145 -> 0.1200 m. 0.5,
-    the only value tried, against 0 (docs/results/segmentation.md, 2026-12-05): development mean 0.0268 ->
-    0.0262 m, 2893 -> 2900/2900 tracked; true-mask oracle on the eight augmented seeds 0.0290 -> 0.0264 m,
-    2396 -> 2400/2400. Adding the refilled keypoints to the kept ones instead was worse (0.0275 m). 0 = off."""
+    again outside the exclusion mask and replace the kept ones (counted as `frames_refilled`): a textured
+    person can take most of ORB's budget and leave the plain room around it few keypoints. Only frames culling
+    compared (not the first), only with segmentation. 0 = off.
+    Measured: docs/results/settings.md#culling-refill_below"""
 
 
 @dataclass

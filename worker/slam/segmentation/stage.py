@@ -23,16 +23,15 @@ class SegmentationStageConfig:
     """Which network marks potentially dynamic pixels."""
 
     segmenter: SegmenterConfig = field(default_factory=lambda: SegmenterConfig(threads=1))
-    """One inference thread by default: on a small shared CPU more torch threads contend and run far slower."""
+    """One inference thread by default: on a small shared CPU more torch threads contend and run far slower.
+    Measured: docs/results/settings.md#segmentation-segmenter-threads"""
     source: str = "network"
     """`network` (the segmenter above) or `truth`: the sequence's true dynamic masks (`truth/masks`, from the
     synthetic and augmented generators), an oracle that separates culling's errors from segmentation's."""
     memory_frames: int = valid(1, 0, 30)
     """The network's mask of a frame also marks what it marked in the previous this-many frames (0 = off): a
-    person the network misses in one frame stays marked, and geometry still judges every segment. 1 (chosen on
-    the development sequences: `no-restoration` mean 0.0377 -> 0.0311 m; 2 and 3 frames 0.0314, 0.0330) also
-    held on AUG 1000 (0.0467 -> 0.0417) and on the real Bonn frames (0.0406 -> 0.0242; the teacher's masks
-    0.0186 -> 0.0182)."""
+    person the network misses in one frame stays marked, and geometry still judges every segment.
+    Measured: docs/results/settings.md#segmentation-memory_frames"""
 
     def __post_init__(self) -> None:
         if self.source not in ("network", "truth"):
