@@ -19,13 +19,12 @@ from __future__ import annotations
 import numpy as np
 
 from worker.slam.config import FeatureConfig, TrackingConfig
-from worker.slam.features.depth import backproject
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.projection import search_by_projection
 from worker.slam.features.search import KeypointIndex
 from worker.slam.features.types import Features
 from worker.slam.geometry.pose_optimizer import PoseEstimate, optimize_pose
-from worker.slam.geometry.se3 import inv, transform
+from worker.slam.geometry.se3 import inv
 from worker.slam.map.keyframe import KeyFrame
 from worker.slam.map.map import Map
 from worker.slam.sensor import SensorModel
@@ -33,6 +32,7 @@ from worker.slam.tracking.frame_view import FrameView, frame_view, undistorted
 from worker.slam.tracking.inputs import TrackInputs
 from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
 from worker.slam.tracking.motion import ConstantVelocityModel
+from worker.slam.tracking.new_keyframe import add_keyframe
 from worker.slam.tracking.recovery import LossAction, after_loss, can_start_map
 from worker.slam.tracking.relocalization import older_map_candidates, pnp_against_keyframe, relocalisation_candidates
 from worker.slam.tracking.result import TrackResult
@@ -365,25 +365,10 @@ class Tracker:
         return need_keyframe(s, self.tc)
 
     def _insert_keyframe(self, res: TrackResult, view: FrameView) -> KeyFrame:
-        """Make frame `res` a keyframe: its untracked keypoints with depth become new map points."""
-        feats, pids = res.feats, res.point_ids.copy()
-        p = self.map.points
-        tracked = pids >= 0
-        p.n_obs[pids[tracked]] += 1
-        z = feats.depth
-        new = ~tracked & (z > 0) & (z < self.new_point_max_depth_m)
-        kf_id = len(self.map)
-        if new.any():
-            X_c = backproject(feats.uv[new], z[new], self.K)
-            pids[new] = p.add(transform(res.T_WC, X_c), feats.desc[new], res.T_WC[:3, 3], feats.octave[new],
-                              self.fc.scale_factor, kf_id)
-        s = self.image_stride
-        kf = KeyFrame(kf_id, res.index, res.timestamp, res.T_WC.copy(), feats, pids,
-                      view.rgb[::s, ::s].copy(), np.ascontiguousarray(view.dense_depth[::s, ::s]).copy(),
-                      np.ascontiguousarray(view.measured[::s, ::s]).copy())
-        self.map.add_keyframe(kf)
-        res.point_ids = pids
-        self.ref_kf = kf_id
-        self.local_kfs = [kf_id] + self.map.best_covisible(kf_id, self.tc.local_map_keyframes - 1)
+        """Make frame `res` a keyframe (`new_keyframe.add_keyframe`); it becomes the reference keyframe."""
+        kf = add_keyframe(self.map, res, view, self.K, self.fc.scale_factor, self.new_point_max_depth_m,
+                          self.image_stride)
+        self.ref_kf = kf.id
+        self.local_kfs = [kf.id] + self.map.best_covisible(kf.id, self.tc.local_map_keyframes - 1)
         self.last_kf_frame = res.index
         return kf
