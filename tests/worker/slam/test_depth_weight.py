@@ -9,16 +9,19 @@ from worker.slam.config import PipelineConfig
 from worker.slam.io.sequence import Sequence
 from worker.slam.pipeline import run_pipeline
 from worker.slam.presets import get_preset
+from worker.slam.sensor import SensorModel
 from worker.slam.synth.generator import SynthConfig, generate_synthetic
-from worker.slam.tracking.tracker import Tracker
 
 NO_MAP = {"dense": {"enabled": False}}
 
 
 def test_unregistered_depth_weighs_less_in_pose_optimisation():
     cfg = PipelineConfig()
-    assert Tracker(PRESETS["tum3"], cfg).bf == pytest.approx(535.4 * cfg.tracking.virtual_baseline_m)
-    assert Tracker(PRESETS["7scenes"], cfg).bf == pytest.approx(585.0 * cfg.tracking.unregistered_baseline_m)
+    def bf(camera: str) -> float:
+        return SensorModel.build(PRESETS[camera], cfg.features, cfg.tracking).bf
+
+    assert bf("tum3") == pytest.approx(535.4 * cfg.tracking.virtual_baseline_m)
+    assert bf("7scenes") == pytest.approx(585.0 * cfg.tracking.unregistered_baseline_m)
     assert cfg.tracking.unregistered_baseline_m < cfg.tracking.virtual_baseline_m
 
 

@@ -9,12 +9,11 @@ from worker.slam.camera import Camera
 from worker.slam.evaluation.metrics import evaluate
 from worker.slam.geometry.se3 import exp_se3, inv
 from worker.slam.io.trajectory import Trajectory
-from worker.slam.mapping.local_mapping import LocalMapper
 from worker.slam.mapping.loop_closure import LoopCloser
 from worker.slam.mapping.place_recognition import PlaceRecognizer
 from worker.slam.mapping.pose_graph import optimize_pose_graph
 from worker.slam.presets import get_preset
-from worker.slam.tracking.tracker import Tracker
+from worker.slam.run.parts import build_slam
 
 CAM = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, name="synthetic")
 
@@ -81,10 +80,9 @@ def turn_run():
     cfg = get_preset("orb-only", {"loop": {"min_keyframe_gap": 6, "min_correction_m": 0.0},
                                   # exact synthetic depth deserves the full (ORB-SLAM2) depth weight
                                   "tracking": {"keyframe_max_frames": 5, "virtual_baseline_m": 0.08}})
-    tr = Tracker(CAM, cfg)
-    mapper = LocalMapper(tr.map, cfg.mapping, CAM.K, tr.bf, tr.extractor.inv_sigma2, cfg.tracking.huber_px,
-                         (CAM.width, CAM.height))
-    closer = LoopCloser(tr.map, cfg.loop, CAM.K, tr.bf, tr.extractor.inv_sigma2)
+    parts = build_slam(CAM, cfg)
+    tr, mapper = parts.tracker, parts.mapper
+    closer = LoopCloser(parts.map, cfg.loop, parts.sensor)
     est = []
     for i, T in enumerate(poses):
         rgb, depth = render(T)

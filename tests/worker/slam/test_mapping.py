@@ -14,7 +14,7 @@ from worker.slam.mapping.dense import fuse_keyframes, voxel_filter
 from worker.slam.mapping.local_ba import local_bundle_adjust
 from worker.slam.mapping.local_mapping import cull_points
 from worker.slam.presets import get_preset
-from worker.slam.tracking.tracker import Tracker
+from worker.slam.run.parts import build_slam
 
 CAM = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, name="synthetic")
 
@@ -24,7 +24,7 @@ def mapped():
     """A map built by the tracker (no local BA) on a room sequence with frequent keyframes."""
     cfg = get_preset("orb-only", {"tracking.keyframe_max_frames": 4})
     poses = trajectory(30, yaw_span_deg=30)
-    tr = Tracker(CAM, cfg)
+    tr = build_slam(CAM, cfg).tracker
     for i, T in enumerate(poses):
         rgb, depth = render(T)
         tr.track(i, i / 30, rgb, depth)
@@ -53,7 +53,7 @@ def test_local_ba_pulls_perturbed_keyframes_back(mapped):
     for i in local:
         m.keyframes[i].T_WC = m.keyframes[i].T_WC @ exp_se3(np.r_[rng.normal(0, 0.01, 3), rng.normal(0, 0.005, 3)])
     before = [pose_distance(m.keyframes[i].T_WC, gt[m.keyframes[i].frame_index])[0] for i in local]
-    stats = local_bundle_adjust(m, local, K_SYN, tr.bf, tr.extractor.inv_sigma2, iterations=10)
+    stats = local_bundle_adjust(m, local, K_SYN, tr.sensor.bf, tr.sensor.inv_sigma2, iterations=10)
     after = [pose_distance(m.keyframes[i].T_WC, gt[m.keyframes[i].frame_index])[0] for i in local]
     assert stats is not None and stats.fixed > 0 and stats.cost_after < stats.cost_before
     assert np.mean(after) < 0.5 * np.mean(before) and np.mean(after) <= np.mean(orig) + 0.001

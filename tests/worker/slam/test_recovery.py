@@ -13,6 +13,7 @@ from worker.slam.geometry.se3 import inv, pose_distance
 from worker.slam.io.sequence import Sequence
 from worker.slam.pipeline import run_pipeline
 from worker.slam.presets import get_preset
+from worker.slam.run.parts import build_slam
 from worker.slam.tracking.recovery import LossAction, after_loss, can_start_map
 from worker.slam.tracking.tracker import Tracker
 
@@ -33,7 +34,7 @@ def test_loss_policy_waits_then_resets_young_maps_and_starts_new_ones():
 
 
 def test_map_waits_for_a_frame_that_gives_enough_points():
-    tr = Tracker(CAM, get_preset("orb-only"))
+    tr = build_slam(CAM, get_preset("orb-only")).tracker
     rgb, depth = render(pose([0, 0, 0], 0))
     sparse = depth.copy()
     sparse[:, 30:] = 0  # depth only in a thin strip: a handful of points
@@ -56,7 +57,7 @@ def _lose_view(tr: Tracker):
 
 
 def test_a_loss_starts_a_new_map_at_the_prediction_that_then_tracks():
-    tr = Tracker(CAM, get_preset("orb-only"))
+    tr = build_slam(CAM, get_preset("orb-only")).tracker
     res, pred, old_points = _lose_view(tr)
     assert not res.ok and res.new_map and not res.relocalised and res.keyframe is not None
     assert np.allclose(res.T_WC, pred) and np.allclose(res.keyframe.T_WC, pred)
@@ -72,14 +73,14 @@ def test_a_loss_starts_a_new_map_at_the_prediction_that_then_tracks():
 
 
 def test_an_established_map_is_kept_when_a_new_one_starts():
-    tr = Tracker(CAM, _tracking(get_preset("orb-only"), reset_max_keyframes=0))
+    tr = build_slam(CAM, _tracking(get_preset("orb-only"), reset_max_keyframes=0)).tracker
     res, _, old_points = _lose_view(tr)
     assert res.new_map
     assert tr.map.points.alive[:old_points].any()  # still there for relocalisation and loop closure
 
 
 def test_waiting_keeps_the_frame_lost_without_a_new_map():
-    tr = Tracker(CAM, _tracking(get_preset("orb-only"), new_map_after_lost=3))
+    tr = build_slam(CAM, _tracking(get_preset("orb-only"), new_map_after_lost=3)).tracker
     res, _, _ = _lose_view(tr)
     assert not res.ok and not res.new_map and res.keyframe is None
 
@@ -95,7 +96,7 @@ def test_metrics_count_new_maps(tmp_path):
 
 
 def test_a_new_map_that_sees_the_old_one_again_is_merged_onto_it():
-    tr = Tracker(CAM, _tracking(get_preset("orb-only"), reset_max_keyframes=0))
+    tr = build_slam(CAM, _tracking(get_preset("orb-only"), reset_max_keyframes=0)).tracker
     poses = trajectory(6, yaw_span_deg=5)
     res, _, _ = _lose_view(tr)
     assert res.new_map

@@ -12,10 +12,10 @@ from worker.slam.geometry.pnp import pnp_ransac
 from worker.slam.geometry.pose_optimizer import optimize_pose, pose_entropy
 from worker.slam.geometry.se3 import exp_se3, inv, log_se3, pose_distance, transform
 from worker.slam.presets import get_preset
+from worker.slam.run.parts import build_slam
 from worker.slam.tracking.inputs import TrackInputs
 from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
 from worker.slam.tracking.motion import ConstantVelocityModel
-from worker.slam.tracking.tracker import Tracker
 
 CAM = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, name="synthetic")
 
@@ -124,7 +124,7 @@ def test_keyframe_policy():
 @pytest.fixture(scope="module")
 def room_run():
     poses = trajectory(45, yaw_span_deg=40)
-    tr = Tracker(CAM, get_preset("orb-only"))
+    tr = build_slam(CAM, get_preset("orb-only")).tracker
     results = []
     for i, T in enumerate(poses):
         rgb, depth = render(T)
@@ -145,7 +145,7 @@ def test_tracker_synthetic_room_subcentimetre(room_run):
 
 def test_tracker_hooks_exclude_mask_and_extra_features():
     poses = trajectory(6, yaw_span_deg=5)
-    tr = Tracker(CAM, get_preset("orb-only"))
+    tr = build_slam(CAM, get_preset("orb-only")).tracker
     exclude = np.zeros((480, 640), bool)
     exclude[100:300, 200:400] = True
     extra = Features(np.array([[250.0, 150.0], [300.0, 200.0]]), np.zeros(2, int), np.ones(2, np.float32),
@@ -164,7 +164,7 @@ def test_tracker_hooks_exclude_mask_and_extra_features():
 
 def test_relocalisation_after_a_jump():
     poses = trajectory(12, yaw_span_deg=10)
-    tr = Tracker(CAM, get_preset("orb-only"))
+    tr = build_slam(CAM, get_preset("orb-only")).tracker
     for i, T in enumerate(poses[:8]):
         rgb, depth = render(T)
         assert tr.track(i, i / 30, rgb, depth).ok
@@ -181,7 +181,7 @@ def test_an_overshooting_velocity_is_retried_from_the_last_pose_before_relocalis
     """A velocity 25 cm and 15 deg off (as from a few badly tracked frames) puts the prediction where no map
     point matches: the frame is tracked from the last pose instead (`retry_from_last_pose`), not relocalised."""
     poses = trajectory(12, yaw_span_deg=10)
-    tr = Tracker(CAM, get_preset("orb-only", {"tracking": {"retry_from_last_pose": retry}}))
+    tr = build_slam(CAM, get_preset("orb-only", {"tracking": {"retry_from_last_pose": retry}})).tracker
     for i, T in enumerate(poses[:8]):
         rgb, depth = render(T)
         assert tr.track(i, i / 30, rgb, depth).ok
@@ -202,7 +202,7 @@ def test_tracker_undistorts_keypoints_of_a_distorted_camera():
     und = cv2.undistortPoints(np.stack([u, v], -1).reshape(-1, 1, 2), K_SYN, dist, P=K_SYN).reshape(480, 640, 2)
     mx, my = und[..., 0].astype(np.float32), und[..., 1].astype(np.float32)
     poses = trajectory(20, yaw_span_deg=15)
-    tr = Tracker(cam, get_preset("orb-only"))
+    tr = build_slam(cam, get_preset("orb-only")).tracker
     est = []
     for i, T in enumerate(poses):
         rgb, depth = render(T)
@@ -224,7 +224,7 @@ def test_relocalisation_on_real_frames(redkitchen):
 
     seq = Sequence(redkitchen, PRESETS["7scenes"])
     gt = seq.groundtruth.poses
-    tr = Tracker(seq.camera, get_preset("orb-only"))
+    tr = build_slam(seq.camera, get_preset("orb-only")).tracker
     for i in range(0, 60, 2):
         f = seq[i]
         res = tr.track(i, f.timestamp, f.rgb, f.depth)

@@ -10,6 +10,7 @@ from worker.slam.camera import Camera
 from worker.slam.geometry.se3 import transform
 from worker.slam.mapping.local_mapping import LocalMapper
 from worker.slam.presets import get_preset
+from worker.slam.run.parts import build_slam
 from worker.slam.tracking.tracker import Tracker
 
 CAM = Camera(525.0, 525.0, 319.5, 239.5, 5000.0, name="synthetic")
@@ -19,9 +20,8 @@ def _map_room(neighbours: int) -> tuple[Tracker, LocalMapper, np.ndarray, np.nda
     """Track and map the room with depth points only up to 2.5 m: the far walls are left to triangulation."""
     cfg = get_preset("orb-only")
     cfg = replace(cfg, mapping=replace(cfg.mapping, triangulate_neighbours=neighbours, new_point_max_depth_m=2.5))
-    tr = Tracker(CAM, cfg)
-    mapper = LocalMapper(tr.map, cfg.mapping, CAM.K, tr.bf, tr.extractor.inv_sigma2, cfg.tracking.huber_px,
-                         (CAM.width, CAM.height))
+    parts = build_slam(CAM, cfg)
+    tr, mapper = parts.tracker, parts.mapper
     poses = trajectory(40, yaw_span_deg=30)
     made: list[np.ndarray] = []
     for i, T in enumerate(poses):

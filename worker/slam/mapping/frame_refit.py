@@ -16,6 +16,7 @@ import numpy as np
 from worker.slam.config import TrackingConfig
 from worker.slam.geometry.pose_optimizer import optimize_pose
 from worker.slam.map.map_points import MapPoints
+from worker.slam.sensor import SensorModel
 
 
 @dataclass
@@ -48,11 +49,12 @@ class FrameMatchLog:
                                         depth[m].astype(np.float32), octave[m].astype(np.int8)))
 
 
-def refit_poses(poses: np.ndarray, log: FrameMatchLog, points: MapPoints, K: np.ndarray, bf: float,
-                inv_sigma2: np.ndarray, tc: TrackingConfig) -> int:
+def refit_poses(poses: np.ndarray, log: FrameMatchLog, points: MapPoints, sensor: SensorModel,
+                tc: TrackingConfig) -> int:
     """Re-solve in place each logged frame of `poses` (F,4,4) T_WC, world frame of the map, from its matches to
-    the still-alive `points`, with the tracker's motion-only BA settings `tc`; a frame keeps its pose when fewer
-    than `tc.min_matches` alive points (or inliers of the new solve) remain. Returns the number re-solved."""
+    the still-alive `points`, with the run's `sensor` and the tracker's motion-only BA settings `tc`; a frame keeps
+    its pose when fewer than `tc.min_matches` alive points (or inliers of the new solve) remain. Returns the
+    number re-solved."""
     n = 0
     for k, m in enumerate(log.frames):
         if m is None:
@@ -62,8 +64,8 @@ def refit_poses(poses: np.ndarray, log: FrameMatchLog, points: MapPoints, K: np.
             continue
         ids = m.ids[alive]
         est = optimize_pose(poses[k], points.pos[ids], m.uv[alive].astype(np.float64),
-                            m.depth[alive].astype(np.float64), inv_sigma2[m.octave[alive]], K, bf, tc.huber_px,
-                            tc.ba_rounds, tc.ba_iterations)
+                            m.depth[alive].astype(np.float64), sensor.inv_sigma2[m.octave[alive]], sensor.K,
+                            sensor.bf, tc.huber_px, tc.ba_rounds, tc.ba_iterations)
         if est.n_inliers >= tc.min_matches:
             poses[k] = est.T_WC
             n += 1

@@ -10,6 +10,7 @@ from worker.slam.map.map import Map
 from worker.slam.mapping.fuse import FuseGeometry, fuse_neighbours
 from worker.slam.mapping.local_ba import BAStats, local_bundle_adjust
 from worker.slam.mapping.triangulation import triangulate_new_points
+from worker.slam.sensor import SensorModel
 
 MIN_OBSERVATIONS = 2
 
@@ -33,18 +34,16 @@ def cull_points(slam_map: Map, kf_id: int, cfg: MappingConfig) -> int:
 
 
 class LocalMapper:
-    def __init__(self, slam_map: Map, cfg: MappingConfig, K: np.ndarray, bf: float, inv_sigma2: np.ndarray,
-                 huber_px: float, size: tuple[int, int]) -> None:
-        """`size` = the image's (width, height) px; `inv_sigma2` (levels,) the pyramid's 1/sigma^2 per octave."""
-        self.map, self.cfg, self.K, self.bf = slam_map, cfg, K, bf
-        self.inv_sigma2, self.huber_px = inv_sigma2, huber_px
+    def __init__(self, slam_map: Map, cfg: MappingConfig, sensor: SensorModel, huber_px: float) -> None:
+        """`huber_px`: the robust kernel's width in BA (the tracker's, `tracking.huber_px`)."""
+        self.map, self.cfg, self.K, self.bf = slam_map, cfg, sensor.K, sensor.bf
+        self.inv_sigma2, self.huber_px = sensor.inv_sigma2, huber_px
         self.n_processed = 0
         self.culled = 0
         self.triangulated = 0
         self.fused = 0
-        # the pyramid's scale factor, from the per-octave 1/sigma^2 it was built with (one level: no pyramid)
-        self.scale_factor = float(np.sqrt(inv_sigma2[0] / inv_sigma2[1])) if len(inv_sigma2) > 1 else 1.0
-        self.geometry = FuseGeometry(K, size, 1.0 / np.sqrt(inv_sigma2), inv_sigma2, bf)
+        self.scale_factor = sensor.scale_factor
+        self.geometry = FuseGeometry(sensor.K, sensor.size, sensor.sigmas, sensor.inv_sigma2, sensor.bf)
         self.last_ba: BAStats | None = None
 
     def process(self, kf: KeyFrame) -> None:

@@ -19,16 +19,16 @@ from worker.slam.map.keyframe import KeyFrame
 from worker.slam.map.map import Map
 from worker.slam.mapping.place_recognition import PlaceRecognizer
 from worker.slam.mapping.pose_graph import optimize_pose_graph
+from worker.slam.sensor import SensorModel
 
 STRONG_COVIS = 100
 MAX_CANDIDATES = 3
 
 
 class LoopCloser:
-    def __init__(self, slam_map: Map, cfg: LoopConfig, K: np.ndarray, bf: float,
-                 inv_sigma2: np.ndarray | None = None) -> None:
-        self.map, self.cfg, self.K, self.bf = slam_map, cfg, K, bf
-        self.inv_sigma2 = inv_sigma2 if inv_sigma2 is not None else 1.2 ** (-2.0 * np.arange(8))
+    def __init__(self, slam_map: Map, cfg: LoopConfig, sensor: SensorModel) -> None:
+        self.map, self.cfg, self.K, self.bf = slam_map, cfg, sensor.K, sensor.bf
+        self.inv_sigma2 = sensor.inv_sigma2
         self.places = PlaceRecognizer(cfg.descriptors_per_keyframe)
         self.loop_edges: list[tuple[int, int, np.ndarray, float]] = []
         self.n_loops = 0

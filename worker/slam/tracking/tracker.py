@@ -16,38 +16,46 @@ the old one (merged) and tracking continues on both maps' points.
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
-from worker.slam.camera import Camera
-from worker.slam.config import PipelineConfig
-from worker.slam.features.depth import backproject, lookup_depth
+from worker.slam.config import FeatureConfig, TrackingConfig
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.projection import search_by_projection
 from worker.slam.features.search import KeypointIndex
 from worker.slam.features.types import Features
 from worker.slam.geometry.pose_optimizer import PoseEstimate, optimize_pose
-from worker.slam.geometry.se3 import inv, transform
+from worker.slam.geometry.se3 import inv
 from worker.slam.map.keyframe import KeyFrame
 from worker.slam.map.map import Map
+from worker.slam.sensor import SensorModel
+from worker.slam.tracking.frame_view import FrameView, frame_view, undistorted
 from worker.slam.tracking.inputs import TrackInputs
 from worker.slam.tracking.keyframe_policy import KeyframeDecisionInput, need_keyframe
 from worker.slam.tracking.motion import ConstantVelocityModel
+from worker.slam.tracking.new_keyframe import add_keyframe
 from worker.slam.tracking.recovery import LossAction, after_loss, can_start_map
 from worker.slam.tracking.relocalization import older_map_candidates, pnp_against_keyframe, relocalisation_candidates
 from worker.slam.tracking.result import TrackResult
 
 
 class Tracker:
-    def __init__(self, camera: Camera, cfg: PipelineConfig, slam_map: Map | None = None) -> None:
-        self.camera = camera
-        self.cfg = cfg
-        self.tc = cfg.tracking
-        self.K = camera.K
-        baseline = self.tc.virtual_baseline_m if camera.depth_registered else self.tc.unregistered_baseline_m
-        self.bf = camera.fx * baseline
-        self.extractor = OrbExtractor(cfg.features)
-        self.map = slam_map if slam_map is not None else Map()
+    """Tracks frames into `slam_map` (shared with local mapping and loop closure, which change it between
+    frames) with the run's `sensor`; reads only the `tracking` and `features` settings, plus the two numbers
+    of other sections it applies when it creates a keyframe (`mapping.new_point_max_depth_m`, `dense.stride`).
+    """
+
+    def __init__(self, sensor: SensorModel, slam_map: Map, tracking: TrackingConfig, features: FeatureConfig,
+                 new_point_max_depth_m: float, image_stride: int) -> None:
+        """`new_point_max_depth_m`: keypoints farther than this make no map points; `image_stride`: keyframes
+        keep their images subsampled by it (for the dense map)."""
+        self.sensor = sensor
+        self.tc = tracking
+        self.fc = features
+        self.K = sensor.K
+        self.new_point_max_depth_m = new_point_max_depth_m
+        self.image_stride = image_stride
+        self.extractor = OrbExtractor(features)
+        self.map = slam_map
         self.motion = ConstantVelocityModel()
         self.ref_kf: int | None = None
         self.local_kfs: list[int] = []
@@ -78,57 +86,14 @@ class Tracker:
         `given`: what the per-frame stages found (features, exclude mask, restored images; see `TrackInputs`).
         """
         given = given if given is not None else TrackInputs()
-        exclude_mask, restored_depth = given.exclude_mask, given.restored_depth
-        if given.restored_rgb is not None:
-            rgb = given.restored_rgb
-        used_depth = restored_depth if restored_depth is not None else depth
-        if given.features is not None:
-            feats = given.features
-            if restored_depth is not None and len(feats):
-                feats = feats.select(np.arange(len(feats)))
-                feats.depth = lookup_depth(feats.uv, used_depth, self.cfg.features.min_depth_m,
-                                           self.cfg.features.max_depth_m,
-                                           edge_radius=self.cfg.features.depth_edge_radius_px)
-        else:
-            gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
-            feats = self.extractor.extract(gray, used_depth, exclude_mask)
-        extra_features = given.extra_features
-        if extra_features is not None and len(extra_features):
-            extra = extra_features.select(np.arange(len(extra_features)))
-            missing = extra.depth <= 0
-            extra.depth[missing] = lookup_depth(extra.uv[missing], used_depth, self.cfg.features.min_depth_m,
-                                                self.cfg.features.max_depth_m)
-            feats = Features.concat([feats, extra])
-        feats = self._undistorted(feats)
-        dense_depth = used_depth
-        if exclude_mask is not None and restored_depth is None:
-            dense_depth = np.where(exclude_mask, 0.0, depth).astype(np.float32)
-
+        view = frame_view(rgb, depth, given, self.extractor, self.fc, self.sensor)
         if len(self.map) == 0:
-            return self._initialise(index, timestamp, feats, rgb, dense_depth, depth, given.held_back)
-
+            return self._initialise(index, timestamp, view, given.held_back)
         pred = self.motion.predict()
         assert pred is not None and self.ref_kf is not None, "the map's first keyframe set both"
-        est, pids, feats = self._track_from(pred, feats, given.held_back)
-        if est is None and self.tc.retry_from_last_pose and self.motion.velocity is not None:
-            # ORB-SLAM's fallback from the motion model to the last frame's pose: a velocity from a few badly
-            # tracked frames overshoots (Bonn, motion blur behind people: the frame after them was lost)
-            assert self.motion.last is not None
-            est, pids, feats = self._track_from(self.motion.last, feats, given.held_back)
-            self.last_pose_retries += int(est is not None)
-        relocalised = False
+        est, pids, feats, relocalised = self._estimate(pred, view.feats, given.held_back)
         if est is None:
-            est, pids = self._relocalise(feats)
-            relocalised = est is not None
-        if est is None:
-            self.lost_streak += 1
-            self.motion.reset(pred)  # keep the prediction as the last pose; forget the velocity
-            res = TrackResult(index, timestamp, pred, False, False, feats, np.full(len(feats), -1, np.int64),
-                              None, self.ref_kf)
-            action = after_loss(self.lost_streak, len(self.map) - self.map_starts[-1], self.tc)
-            if action is not LossAction.WAIT:
-                self._start_new_map(res, rgb, dense_depth, depth, discard_old=action is LossAction.RESET)
-            return res
+            return self._lost(index, timestamp, pred, feats, view)
         self.lost_streak = 0
         if relocalised:
             self.motion.reset(est.T_WC)
@@ -139,7 +104,7 @@ class Tracker:
         res = TrackResult(index, timestamp, est.T_WC, True, relocalised, feats, pids, est.covariance,
                           self.ref_kf)
         if relocalised or self._need_keyframe(res):
-            res.keyframe = self._insert_keyframe(res, rgb, dense_depth, depth)
+            res.keyframe = self._insert_keyframe(res, view)
             res.ref_kf = res.keyframe.id
         if len(self.map_starts) > 1:
             res.merged = self._merge_into_older_map(res)
@@ -147,20 +112,47 @@ class Tracker:
         self.last_result = res
         return res
 
-    def _undistorted(self, feats: Features) -> Features:
-        """Keypoints to ideal pinhole pixels (ORB-SLAM2 undistorts keypoints, not images); as they are when the
-        camera has no distortion."""
-        if not self.camera.has_distortion or not len(feats):
-            return feats
-        und = cv2.undistortPoints(feats.uv.reshape(-1, 1, 2), self.K, np.asarray(self.camera.dist), P=self.K)
-        return Features(und.reshape(-1, 2).astype(np.float64), feats.octave, feats.response, feats.desc,
-                        feats.depth, uv_raw=feats.uv)
+    def on_map_updated(self, res: TrackResult) -> None:
+        """After local BA / loop closure moved keyframes: re-anchor the motion model's last pose."""
+        if res.keyframe is not None and self.motion.last is not None:
+            self.motion.last = res.keyframe.T_WC.copy()
 
     # ---- steps -------------------------------------------------------------------------------------------
 
-    def _initialise(self, index: int, timestamp: float, feats: Features, rgb: np.ndarray,
-                    dense_depth: np.ndarray, measured: np.ndarray, held_back: Features | None) -> TrackResult:
+    def _estimate(self, pred: np.ndarray, feats: Features, held_back: Features | None
+                  ) -> tuple[PoseEstimate | None, np.ndarray, Features, bool]:
+        """The frame's pose from the prediction `pred`, else from the last pose, else by relocalisation;
+        returns (estimate or None, point ids, the frame's keypoints, whether it relocalised)."""
+        est, pids, feats = self._track_from(pred, feats, held_back)
+        if est is None and self.tc.retry_from_last_pose and self.motion.velocity is not None:
+            # ORB-SLAM's fallback from the motion model to the last frame's pose: a velocity from a few badly
+            # tracked frames overshoots (Bonn, motion blur behind people: the frame after them was lost)
+            assert self.motion.last is not None
+            est, pids, feats = self._track_from(self.motion.last, feats, held_back)
+            self.last_pose_retries += int(est is not None)
+        if est is not None:
+            return est, pids, feats, False
+        est, pids = self._relocalise(feats)
+        return est, pids, feats, est is not None
+
+    def _lost(self, index: int, timestamp: float, pred: np.ndarray, feats: Features,
+              view: FrameView) -> TrackResult:
+        """A frame neither tracked nor relocalised: posed at the prediction; maybe the start of a new map."""
+        assert self.ref_kf is not None
+        self.lost_streak += 1
+        self.motion.reset(pred)  # keep the prediction as the last pose; forget the velocity
+        res = TrackResult(index, timestamp, pred, False, False, feats, np.full(len(feats), -1, np.int64),
+                          None, self.ref_kf)
+        action = after_loss(self.lost_streak, len(self.map) - self.map_starts[-1], self.tc)
+        if action is not LossAction.WAIT:
+            self._start_new_map(res, view, discard_old=action is LossAction.RESET)
+        return res
+
+    # ---- steps -------------------------------------------------------------------------------------------
+
+    def _initialise(self, index: int, timestamp: float, view: FrameView, held_back: Features | None) -> TrackResult:
         T = np.eye(4)
+        feats = view.feats
         if not can_start_map(self._n_new_points(feats), self.tc) and self.tc.rescue_with_held_back \
                 and held_back is not None and len(held_back):
             # segmentation marks most of the first view: start on every keypoint (nothing to judge them by yet;
@@ -173,7 +165,7 @@ class Tracker:
         if not can_start_map(self._n_new_points(feats), self.tc):
             return res  # wait for a frame with enough depth
         res.ok = True
-        res.keyframe = self._insert_keyframe(res, rgb, dense_depth, measured)
+        res.keyframe = self._insert_keyframe(res, view)
         self.motion.reset(T)
         self.last_result = res
         return res
@@ -181,10 +173,9 @@ class Tracker:
     def _n_new_points(self, feats: Features) -> int:
         """Map points a keyframe on `feats` with nothing tracked would create (see `_insert_keyframe`)."""
         z = feats.depth
-        return int(((z > 0) & (z < self.cfg.mapping.new_point_max_depth_m)).sum())
+        return int(((z > 0) & (z < self.new_point_max_depth_m)).sum())
 
-    def _start_new_map(self, res: TrackResult, rgb: np.ndarray, dense_depth: np.ndarray, measured: np.ndarray,
-                       discard_old: bool) -> None:
+    def _start_new_map(self, res: TrackResult, view: FrameView, discard_old: bool) -> None:
         """Make lost frame `res` (pose = the prediction) the first keyframe of a new map, if it can start one.
 
         The frame itself stays `ok=False`: its pose was predicted, not measured.
@@ -194,7 +185,7 @@ class Tracker:
         if discard_old:
             p = self.map.points
             p.kill(np.flatnonzero(p.alive[: p.n] & (p.first_kf[: p.n] >= self.map_starts[-1])))
-        res.keyframe = self._insert_keyframe(res, rgb, dense_depth, measured)
+        res.keyframe = self._insert_keyframe(res, view)
         res.ref_kf = res.keyframe.id
         res.new_map = True
         self.map_starts.append(res.keyframe.id)
@@ -256,7 +247,7 @@ class Tracker:
 
     def _with_held_back(self, feats: Features, held_back: Features) -> Features:
         """The frame's (undistorted) keypoints followed by the held-back ones, undistorted the same way."""
-        return Features.concat([feats, self._undistorted(held_back)])
+        return Features.concat([feats, undistorted(held_back, self.sensor)])
 
     def _local_points(self) -> np.ndarray:
         kfs = self.map.keyframes
@@ -269,7 +260,7 @@ class Tracker:
     def _search(self, index: KeypointIndex, ids: np.ndarray, T_WC: np.ndarray, radius: float):
         p = self.map.points
         return search_by_projection(index, p.pos[ids], p.desc[ids], p.normal[ids], p.max_dist[ids], T_WC,
-                                    self.K, (self.camera.width, self.camera.height), self.extractor.scales,
+                                    self.K, self.sensor.size, self.sensor.scales,
                                     radius, self.tc.max_hamming, self.tc.ratio)
 
     def _optimize(self, feats: Features, ids: np.ndarray, kp: np.ndarray, T_WC: np.ndarray,
@@ -280,7 +271,7 @@ class Tracker:
         established points' pose was taken)."""
         def solve(weights: np.ndarray | None = None) -> PoseEstimate:
             return optimize_pose(T_WC, self.map.points.pos[ids], feats.uv[kp], feats.depth[kp],
-                                 self.extractor.inv_sigma2[feats.octave[kp]], self.K, self.bf, self.tc.huber_px,
+                                 self.sensor.inv_sigma2[feats.octave[kp]], self.K, self.sensor.bf, self.tc.huber_px,
                                  self.tc.ba_rounds, self.tc.ba_iterations, weights)
 
         est = solve()
@@ -369,44 +360,15 @@ class Tracker:
     def _need_keyframe(self, res: TrackResult) -> bool:
         if not len(self.map):
             return True
-        # ORB-SLAM2 compares with the reference keyframe's well-established points (seen by >= 3 keyframes);
-        # the newest keyframe stands in for it (it shares the most points with the current frame).
-        ref = self.map.keyframes[-1]
-        ref_pids = ref.point_ids[ref.point_ids >= 0]
-        min_obs = 3 if len(self.map) > 2 else 2
-        p = self.map.points
-        ref_tracked = int((p.alive[ref_pids] & (p.n_obs[ref_pids] >= min_obs)).sum())
-        close = (res.feats.depth > 0) & (res.feats.depth < self.tc.close_depth_m)
-        tracked = res.point_ids >= 0
-        s = KeyframeDecisionInput(res.index - self.last_kf_frame, int(tracked.sum()), ref_tracked,
-                                  int((close & tracked).sum()), int((close & ~tracked).sum()))
+        s = KeyframeDecisionInput.of_frame(self.map, res.index, res.feats.depth, res.point_ids, self.last_kf_frame,
+                                           self.tc.close_depth_m)
         return need_keyframe(s, self.tc)
 
-    def _insert_keyframe(self, res: TrackResult, rgb: np.ndarray, dense_depth: np.ndarray,
-                         measured: np.ndarray) -> KeyFrame:
-        feats, pids = res.feats, res.point_ids.copy()
-        p = self.map.points
-        tracked = pids >= 0
-        p.n_obs[pids[tracked]] += 1
-        z = feats.depth
-        new = ~tracked & (z > 0) & (z < self.cfg.mapping.new_point_max_depth_m)
-        kf_id = len(self.map)
-        if new.any():
-            X_c = backproject(feats.uv[new], z[new], self.K)
-            pids[new] = p.add(transform(res.T_WC, X_c), feats.desc[new], res.T_WC[:3, 3], feats.octave[new],
-                              self.cfg.features.scale_factor, kf_id)
-        s = self.cfg.dense.stride
-        kf = KeyFrame(kf_id, res.index, res.timestamp, res.T_WC.copy(), feats, pids,
-                      rgb[::s, ::s].copy(), np.ascontiguousarray(dense_depth[::s, ::s]).copy(),
-                      np.ascontiguousarray(measured[::s, ::s]).copy())
-        self.map.add_keyframe(kf)
-        res.point_ids = pids
-        self.ref_kf = kf_id
-        self.local_kfs = [kf_id] + self.map.best_covisible(kf_id, self.tc.local_map_keyframes - 1)
+    def _insert_keyframe(self, res: TrackResult, view: FrameView) -> KeyFrame:
+        """Make frame `res` a keyframe (`new_keyframe.add_keyframe`); it becomes the reference keyframe."""
+        kf = add_keyframe(self.map, res, view, self.K, self.fc.scale_factor, self.new_point_max_depth_m,
+                          self.image_stride)
+        self.ref_kf = kf.id
+        self.local_kfs = [kf.id] + self.map.best_covisible(kf.id, self.tc.local_map_keyframes - 1)
         self.last_kf_frame = res.index
         return kf
-
-    def on_map_updated(self, res: TrackResult) -> None:
-        """After local BA / loop closure moved keyframes: re-anchor the motion model's last pose."""
-        if res.keyframe is not None and self.motion.last is not None:
-            self.motion.last = res.keyframe.T_WC.copy()

@@ -7,10 +7,12 @@ from worker.slam.config import TrackingConfig
 from worker.slam.geometry.se3 import exp_se3, inv, pose_distance, transform
 from worker.slam.map.map_points import MapPoints
 from worker.slam.mapping.frame_refit import FrameMatchLog, refit_poses
+from worker.slam.sensor import SensorModel
 
 K = np.array([[525.0, 0, 320], [0, 525.0, 240], [0, 0, 1]])
 BF = 525.0 * 0.08
 INV_SIGMA2 = 1.0 / 1.2 ** (2 * np.arange(8))
+SENSOR = SensorModel(K, BF, (640, 480), 1.2 ** np.arange(8), INV_SIGMA2, None)
 TC = TrackingConfig(min_matches=30)  # the tracker's Huber 2.45 px, 4 rounds of 8 iterations
 
 
@@ -41,7 +43,7 @@ def test_a_frame_follows_the_points_that_bundle_adjustment_moved():
     stored = T_true.copy()
     stored[:3, 3] += [0.02, -0.01, 0.015]
     poses = stored[None].copy()
-    n = refit_poses(poses, log, pts, K, BF, INV_SIGMA2, TC)
+    n = refit_poses(poses, log, pts, SENSOR, TC)
     assert n == 1
     dt_before, _ = pose_distance(stored, T_true)
     dt_after, dr_after = pose_distance(poses[0], T_true)
@@ -58,7 +60,7 @@ def test_frames_without_enough_surviving_points_and_unlogged_frames_keep_their_p
     shifted = T_true.copy()
     shifted[:3, 3] += 0.01
     poses = np.stack([shifted, shifted, shifted])
-    n = refit_poses(poses, log, pts, K, BF, INV_SIGMA2, TC)
+    n = refit_poses(poses, log, pts, SENSOR, TC)
     assert n == 1
     assert np.array_equal(poses[0], shifted) and np.array_equal(poses[1], shifted)
     assert pose_distance(poses[2], T_true)[0] < 1e-4
@@ -72,5 +74,5 @@ def test_outlier_matches_do_not_drag_the_refit():
     log.frames[0].uv[:30] += 40.0  # a tenth of the matches wrong (a person's points that slipped through)
     poses = T_true[None].copy()
     poses[0][:3, 3] += 0.01
-    refit_poses(poses, log, pts, K, BF, INV_SIGMA2, TC)
+    refit_poses(poses, log, pts, SENSOR, TC)
     assert pose_distance(poses[0], T_true)[0] < 0.002

@@ -95,16 +95,14 @@ def _map_room(neighbours: int) -> Map:
     from dataclasses import replace
 
     from tests.worker.slam.synthetic_room import render, trajectory
-    from worker.slam.mapping.local_mapping import LocalMapper
     from worker.slam.presets import get_preset
-    from worker.slam.tracking.tracker import Tracker
+    from worker.slam.run.parts import build_slam
 
     cfg = get_preset("orb-only")
     cfg = replace(cfg, mapping=replace(cfg.mapping, fuse_neighbours=neighbours),
                   tracking=replace(cfg.tracking, keyframe_max_frames=5))
-    tr = Tracker(CAM, cfg)
-    mapper = LocalMapper(tr.map, cfg.mapping, CAM.K, tr.bf, tr.extractor.inv_sigma2, cfg.tracking.huber_px,
-                         (CAM.width, CAM.height))
+    parts = build_slam(CAM, cfg)
+    tr, mapper = parts.tracker, parts.mapper
     for i, T in enumerate(trajectory(40, yaw_span_deg=30)):
         res = tr.track(i, i / 30, *render(T))
         assert res.ok

@@ -1,0 +1,40 @@
+"""metrics.json's run-level figures, in their fixed order (readers and the typed schema rely on the keys)."""
+from __future__ import annotations
+
+import resource
+
+import numpy as np
+
+from worker.slam.camera import Camera
+from worker.slam.run.frame_log import FrameLog
+from worker.slam.run.parts import SlamParts
+from worker.slam.run.timer import StageTimer
+
+
+def run_metrics(log: FrameLog, parts: SlamParts, timer: StageTimer, *, loop_s: float, frames_refit: int,
+                overlapped: set[str], dense_points: int, camera: Camera, preset: str, start: int) -> dict:
+    """The 26 run-level entries of metrics.json; the stages' summaries and the evaluation follow them.
+
+    `loop_s`: wall time of the frame loop (s); `frames_refit`: frames re-solved against the final map;
+    `overlapped`: stages whose work ran ahead on another thread; `dense_points`: points in map.ply."""
+    tracked = np.array(log.tracked, dtype=bool)
+    total = len(log)
+    tracker, smap, closer = parts.tracker, parts.map, parts.closer
+    return {
+        "frames": total, "tracked": int(tracked.sum()), "lost": int((~tracked).sum()),
+        "relocalisations": log.relocalisations, "new_maps": log.new_maps, "map_merges": log.merges,
+        "established_switches": tracker.established_switches,
+        "rescued_frames": tracker.rescued_frames, "last_pose_retries": tracker.last_pose_retries,
+        "frames_refit": frames_refit,
+        "keyframes": len(smap), "map_points": smap.points.n_alive, "fused_observations": parts.mapper.fused,
+        "loops": closer.n_loops if closer else 0, "loops_applied": closer.n_applied if closer else 0,
+        "fps": round(total / loop_s, 2) if loop_s > 0 else None,
+        "tracking_fps": round(1000.0 / np.mean(timer.ms["tracking"]), 2) if timer.ms["tracking"] else None,
+        "tracking_cpu_ms": round(1000 * float(np.mean(log.cpu_tracking)), 3) if log.cpu_tracking else None,
+        "timings_ms": timer.means(),
+        "overlapped_stages": sorted(overlapped),
+        "dense_points": dense_points,
+        "stage_info": {k: round(float(np.mean(v)), 4) for k, v in log.stage_info.items()},
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+        "camera": camera.to_dict(), "preset": preset, "start": start,
+    }

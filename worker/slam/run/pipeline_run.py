@@ -1,0 +1,183 @@
+"""One run: per-frame stages -> tracking -> local mapping -> loop closure per `step`, then in `finish` global BA,
+frame refit, the dense map, metrics and evaluation.
+
+The per-frame state kept is the pose relative to its reference keyframe, so BA and loop corrections move every
+frame's pose at the end, and (`mapping.refit_frames`) the map points it matched, so each frame's pose is then
+re-solved against the final map (`mapping/frame_refit.py`). Before each frame the stages get a fresh
+`StageContext` (the motion model's predicted pose, the last tracked pose and its covariance), never the tracker.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from types import TracebackType
+
+import numpy as np
+
+from worker.slam.camera import Camera
+from worker.slam.config import PipelineConfig
+from worker.slam.geometry.se3 import orthonormalize
+from worker.slam.io.prepare_ahead import Prepared
+from worker.slam.io.sequence import Frame, Sequence
+from worker.slam.io.trajectory import Trajectory
+from worker.slam.mapping.carve import FrameViews
+from worker.slam.mapping.dense_map import build_dense_map
+from worker.slam.mapping.frame_refit import refit_poses
+from worker.slam.run.callbacks import ProgressFn
+from worker.slam.run.deferred import DeferredWork
+from worker.slam.run.evaluation import RunEvaluation, evaluate_run
+from worker.slam.run.frame_log import FrameLog
+from worker.slam.run.metrics import run_metrics
+from worker.slam.run.parts import SlamParts, build_slam
+from worker.slam.run.previews import PreviewPicker
+from worker.slam.run.result import RunResult
+from worker.slam.run.stage_runner import StageRunner
+from worker.slam.run.timer import StageTimer
+from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPose
+from worker.slam.tracking.result import TrackResult
+from worker.slam.truth import Truth
+
+
+class PipelineRun:
+    """Contract: `step(frame)` once per frame, in frame order, on one thread (the pipeline thread); then
+    `finish()` once, on the same thread, for the result. Use it as a context manager (or call `close()`): leaving
+    stops the background thread that runs deferred stage work, also after an error.
+
+    `sequence` (optional) is what the stages may read neighbouring frames from, and its ground truth scores the
+    trajectory; `start` and `total` (the first frame's index and the number of frames the caller will step)
+    place the previews and count progress.
+    """
+
+    def __init__(self, camera: Camera, config: PipelineConfig, stages: list[FrameStage], *,
+                 sequence: Sequence | None = None, truth: Truth | None = None, start: int = 0, total: int = 0,
+                 progress: ProgressFn | None = None, restore_behind: bool = True) -> None:
+        """`restore_behind`: run deferred stage work (restoration of keyframes and previews) on a background
+        thread while the next frames are tracked (False: on this thread, right after the frame's tracking)."""
+        self.camera, self.config, self.sequence = camera, config, sequence
+        self.start, self.total, self.progress = start, total, progress
+        self.parts: SlamParts = build_slam(camera, config)
+        self.timer = StageTimer()
+        self.stages = StageRunner(stages, self.timer)
+        self.previews = PreviewPicker(start, total)
+        self.deferred = DeferredWork(restore_behind, self.previews, config.dense.stride)
+        self.log = FrameLog(config.mapping.refit_frames)
+        dense = config.dense
+        self.carve_frames = FrameViews(dense.carve_every if dense.enabled and dense.carve else 0, dense.stride,
+                                       dense.carve_max_views)
+        self._ctx = StageContext(camera, config, sequence, truth)
+        self._t_loop = time.perf_counter()
+
+    def __enter__(self) -> PipelineRun:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self.deferred.close()
+
+    # ---- per frame ---------------------------------------------------------------------------------------
+
+    def step(self, frame: Frame | Prepared) -> TrackResult:
+        """Run the stages on one frame, track it, map its keyframe; a `Prepared` frame brings the stages'
+        `prepare` results computed ahead (`io.prepare_ahead`), a plain `Frame` has them computed here."""
+        item = frame if isinstance(frame, Prepared) else Prepared(frame)
+        self.timer.mark()
+        inputs, deferred_by = self.stages.process(item, self._frame_context())
+        res = self._track(item.frame, inputs)
+        self.log.add_stage_info(inputs.info)
+        if inputs.previews:
+            self.previews.offer(item.frame.index, inputs.previews)
+        if res.keyframe is not None:
+            self._map(res)
+        k = len(self.log)
+        row = self.log.add(item.frame.timestamp, res, inputs.info, self.parts.map)
+        self.carve_frames.offer(k, item.frame.depth)
+        if inputs.deferred is not None and deferred_by is not None:
+            self.deferred.offer(inputs, res, self.timer.ms[deferred_by], row, self.log.stage_info)
+        self.deferred.release(item.frame.index)  # its later frames have gone through the stages
+        if self.progress is not None:
+            self.progress(k + 1, self.total, "tracking")
+        return res
+
+    def _frame_context(self) -> StageContext:
+        """The run's context with the tracker's prediction for the coming frame and its last tracked pose."""
+        tracker = self.parts.tracker
+        last = tracker.last_result
+        return replace(self._ctx, T_WC_pred=tracker.predicted_pose(),
+                       last=None if last is None else TrackedPose(last.index, last.T_WC, last.covariance))
+
+    def _track(self, frame: Frame, inputs: FrameInputs) -> TrackResult:
+        c0 = time.process_time()
+        res = self.parts.tracker.track(frame.index, frame.timestamp, frame.rgb, frame.depth, inputs.track_inputs())
+        self.log.cpu_tracking.append(time.process_time() - c0)
+        self.timer.lap("tracking")
+        return res
+
+    def _map(self, res: TrackResult) -> None:
+        """Local mapping and loop closure on the new keyframe of `res`."""
+        assert res.keyframe is not None
+        self.parts.mapper.process(res.keyframe)
+        self.timer.lap("local_mapping")
+        if self.parts.closer is not None:
+            self.parts.closer.process(res.keyframe)
+            self.timer.lap("loop_closure")
+        self.parts.tracker.on_map_updated(res)
+
+    # ---- at the end --------------------------------------------------------------------------------------
+
+    def finish(self) -> RunResult:
+        """Complete the deferred work, then global BA, frame refit, the dense map, metrics and evaluation."""
+        self.deferred.finish()  # the keyframes' restored images and the previews, before the dense map
+        loop_s = time.perf_counter() - self._t_loop
+        self.close()
+        smap = self.parts.map
+        if self.config.mapping.final_global_ba:
+            self.timer.mark()
+            self.parts.mapper.global_bundle_adjust(self.config.mapping.global_ba_iterations)
+            self.timer.lap("global_ba")
+        self._progress("dense")
+        traj, n_refit = self._trajectory()
+        kf_traj = Trajectory(np.array([kf.timestamp for kf in smap.keyframes]), smap.poses())
+        tracked = np.array(self.log.tracked, dtype=bool)
+        cloud = self._dense_map(traj, tracked)
+        metrics = run_metrics(self.log, self.parts, self.timer, loop_s=loop_s, frames_refit=n_refit,
+                              overlapped=self.stages.overlapped, dense_points=int(len(cloud[0])) if cloud else 0,
+                              camera=self.camera, preset=self.config.name, start=self.start)
+        metrics.update(self.stages.summaries())
+        ev = RunEvaluation({})
+        groundtruth = self.sequence.groundtruth if self.sequence is not None else None
+        if groundtruth is not None:
+            self._progress("evaluation")
+            ev = evaluate_run(groundtruth, traj, self.config.eval)
+            metrics.update(ev.metrics)
+        rows = self.log.finished_rows(self.start, ev.ate_errors)
+        return RunResult(traj, kf_traj, metrics, smap, tracked, cloud, rows, ev.aligned_groundtruth,
+                         self.previews.kept)
+
+    def _progress(self, stage: str) -> None:
+        if self.progress is not None:
+            self.progress(self.total, self.total, stage)
+
+    def _trajectory(self) -> tuple[Trajectory, int]:
+        """Every frame's final T_WC (through its reference keyframe, re-solved against the final map when
+        `mapping.refit_frames`), and how many frames were re-solved. Starts the timer's lap of "dense"."""
+        smap = self.parts.map
+        self.timer.mark()
+        poses = self.log.poses(smap)
+        n_refit = 0
+        if self.log.matches is not None and len(smap):
+            n_refit = refit_poses(poses, self.log.matches, smap.points, self.parts.sensor, self.config.tracking)
+            self.timer.lap("frame_refit")  # "dense" times the dense map alone
+        return Trajectory(np.array(self.log.stamps, dtype=np.float64), orthonormalize(poses)), n_refit
+
+    def _dense_map(self, traj: Trajectory, tracked: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The dense map (M,3) float32 xyz, (M,3) uint8 RGB of the keyframes at their final poses."""
+        smap, dense = self.parts.map, self.config.dense
+        if not (dense.enabled and len(smap)):
+            return None
+        carve_views = self.carve_frames.views(traj.poses, tracked) if self.carve_frames.every else None
+        cloud = build_dense_map(smap.keyframes, self.parts.sensor.K, self.parts.sensor.dist, dense, carve_views)
+        self.timer.lap("dense")
+        return cloud
