@@ -135,7 +135,11 @@ async def receive_upload(request: Request, sink: Sink, *, file_field: str, max_b
             "on_headers_finished",
         )
     }
-    parser = MultipartParser(options[b"boundary"], callbacks)  # type: ignore[arg-type]
+    try:  # python-multipart refuses boundaries over 256 characters (RFC 2046 allows 70) here, not in write()
+        parser = MultipartParser(options[b"boundary"], callbacks)  # type: ignore[arg-type]
+    except (FormParserError, ValueError) as exc:
+        detail = {"boundary_length": len(options[b"boundary"])}
+        raise InvalidInput(f"unusable multipart boundary: {exc}", detail) from None
     digest = hashlib.sha256()
 
     def write(block: bytes) -> None:  # in a worker thread: hashing 4 MiB would stall the event loop

@@ -484,3 +484,16 @@ def test_disconnect_mid_upload_is_a_clear_422() -> None:
         body = b"".join(m.get("body", b"") for m in sent if m["type"] == "http.response.body")
         assert start["status"] == 422 and b"disconnected during the upload" in body
         assert residue(settings.data_dir) == []
+
+
+@pytest.mark.parametrize("length", [257, 4000])
+def test_an_overlong_multipart_boundary_is_422(make_client, seq_tgz, length: int) -> None:
+    """Issue 60.2: python-multipart refuses boundaries over 256 characters when the parser is made (a 500)."""
+    client, settings = make_client()
+    boundary = "b" * length
+    body = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"camera\"\r\n\r\ntum1\r\n"
+            f"--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"s.tgz\"\r\n\r\n"
+            ).encode() + seq_tgz + f"\r\n--{boundary}--\r\n".encode()
+    r = client.post("/api/v1/sequences", content=body,
+                    headers={"content-type": f"multipart/form-data; boundary={boundary}"})
+    assert_clean_rejection(client, settings, r, 422, "boundary")
