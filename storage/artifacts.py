@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import IO, Any, Literal
 
 from storage.errors import Conflict, InvalidInput, NotFound, Unreadable
+from storage.faults import disk_full, insufficient_storage
 from storage.settings import Settings
 
 _ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
@@ -94,7 +95,12 @@ class ArtifactStore:
 
     def new_staging_dir(self, prefix: str = "upload-") -> Path:
         """A fresh, empty, uniquely named directory in :meth:`staging_dir`."""
-        return Path(tempfile.mkdtemp(prefix=prefix, dir=self.staging_dir()))
+        try:
+            return Path(tempfile.mkdtemp(prefix=prefix, dir=self.staging_dir()))
+        except OSError as exc:
+            if disk_full(exc):
+                raise insufficient_storage("starting the upload") from exc
+            raise
 
     def install_sequence(self, src: Path, seq_id: str) -> Path:
         """Move a staged sequence folder to :meth:`sequence_dir` (a rename on the same filesystem)."""
