@@ -7,7 +7,7 @@ import sqlite3
 import pytest
 from sqlalchemy.exc import IntegrityError, OperationalError
 
-from storage.errors import InsufficientStorage, StorageError
+from storage.errors import InsufficientStorage, RequestTimeout, StorageError, Unreadable
 from storage.faults import disk_full
 
 
@@ -46,3 +46,13 @@ def test_other_errors_are_not(exc: BaseException) -> None:
 def test_postgres_disk_full_by_sqlstate() -> None:
     errors = pytest.importorskip("psycopg.errors")
     assert disk_full(OperationalError("INSERT", {}, errors.DiskFull("could not extend file")))
+
+
+@pytest.mark.parametrize(("cls", "status", "code"), [
+    (InsufficientStorage, 507, "insufficient_storage"),
+    (Unreadable, 500, "artifact_unreadable"),
+    (RequestTimeout, 408, "request_timeout"),
+])
+def test_the_new_domain_errors(cls: type[StorageError], status: int, code: str) -> None:
+    err = cls("boom", {"k": 1})
+    assert isinstance(err, StorageError) and (err.http_status, err.code) == (status, code)
