@@ -15,6 +15,7 @@ from backend.api.deps import document_auth
 from backend.api.docs import include_docs
 from backend.api.edge import EdgeMiddleware
 from backend.api.errors import install_error_handlers
+from backend.api.head import HeadMiddleware
 from backend.api.pages import include_dashboard
 from backend.api.streams import StreamLimits
 from storage.artifacts import ArtifactStore
@@ -32,7 +33,7 @@ with `POST /batches`), follow them live (`GET /jobs/{id}/events`, Server-Sent Ev
 trajectory, dense map and metrics (`GET /jobs/{id}/artifacts/{name}`).
 
 Errors always have the shape `{"error": {"code", "message", "detail"}}`. When the server sets
-`VTD_API_TOKEN`, mutating endpoints need `Authorization: Bearer <token>`.
+`VTD_API_TOKEN`, mutating endpoints need `Authorization: Bearer <token>`. Every `GET` also answers `HEAD`.
 """
 
 
@@ -120,5 +121,6 @@ def create_app(
             expose_headers=["Content-Disposition", "Content-Range", "Accept-Ranges"],
             max_age=600,
         )
+    app.add_middleware(HeadMiddleware)  # every GET answers HEAD (headers only)
     app.add_middleware(EdgeMiddleware)  # added last, so outermost: every response gets its request id
     return app

@@ -5,7 +5,8 @@ client sees as a TCP reset).
 - Headers: at most :data:`MAX_HEADER_BYTES`; beyond, a 431 and a lingering close (the rest of what
   the client sends is read and dropped for :data:`LINGER_S`, so it reads the answer, not a reset).
 - Slow headers (slowloris): a request's headers must arrive within :data:`HEADER_TIMEOUT_S` of its
-  first byte, else 408 and close.
+  first byte, else 408 and close. The timer stops once the headers are in, a WebSocket upgrade included
+  (the socket then belongs to the WebSocket protocol: a 408 written into it would kill a live session).
 - Slow bodies: a request whose body stops arriving for :data:`BODY_IDLE_TIMEOUT_S` (while the api is
   waiting for it, not while it pushes back) loses its connection; the upload is cleaned up as a disconnect.
 Idle keep-alive connections close after uvicorn's ``timeout_keep_alive``.
@@ -76,6 +77,10 @@ class LimitedH11Protocol(H11Protocol):
         else:
             super().send_400_response(msg)
 
+    def handle_websocket_upgrade(self, event: h11.Request) -> None:
+        self._disarm()  # the headers are complete; from here the transport is the WebSocket protocol's
+        super().handle_websocket_upgrade(event)
+
     def _arm(self, delay: float, callback: Any) -> None:
         self._disarm()
         self._timer = self.loop.call_later(delay, callback)
@@ -87,6 +92,8 @@ class LimitedH11Protocol(H11Protocol):
 
     def _headers_too_slow(self) -> None:
         self._timer = None
+        if self.transport.get_protocol() is not self:  # upgraded: not ours to answer any more
+            return
         if self.cycle is None or self.cycle.response_complete:
             self._refuse(408, "Request Timeout", b"the request's headers did not arrive in time")
 

@@ -24,7 +24,8 @@ class ListEntry:
 
 
 def parse_list(text: str, path: Path | str | None = None) -> list[ListEntry]:
-    """Entries of a list file's text, sorted by time (stable). ``path`` only names the file in errors."""
+    """Entries of a list file's text, sorted by time; two lines with the same timestamp (as float64) are a
+    FormatError naming the later line. ``path`` only names the file in errors."""
     lines = text.splitlines()
     if len(lines) > MAX_LIST_LINES:
         raise FormatError(f"has {len(lines)} lines; at most {MAX_LIST_LINES} are accepted", path=path)
@@ -50,6 +51,12 @@ def parse_list(text: str, path: Path | str | None = None) -> list[ListEntry]:
     if not entries:
         raise FormatError("lists no frames", path=path)
     entries.sort(key=lambda e: e.timestamp)
+    for before, entry in zip(entries, entries[1:], strict=False):
+        if entry.timestamp <= before.timestamp:  # equal once read as float64 (1e17 + t collapses too)
+            raise FormatError(
+                f"timestamp {entry.timestamp!r} repeats line {before.line}'s: timestamps must strictly increase",
+                path=path, line=entry.line,
+            )
     return entries
 
 

@@ -12,9 +12,11 @@ Writes are atomic (temp file + ``os.replace``): a reader never sees a half-writt
 from __future__ import annotations
 
 import builtins
+import functools
 import os
 import re
 import shutil
+import stat
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -22,7 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any, Literal
 
-from storage.errors import Conflict, InvalidInput, NotFound
+from storage.errors import Conflict, InvalidInput, NotFound, Unreadable
+from storage.faults import disk_full, insufficient_storage
 from storage.settings import Settings
 
 _ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
@@ -33,6 +36,19 @@ _TMP_PREFIX = ".tmp-"
 class ArtifactInfo:
     name: str
     size_bytes: int
+
+
+@functools.cache
+def file_mode() -> int:
+    """The mode of files the service creates: 0666 minus the process umask, as for any ``open()``
+    (0644 under the usual 022; 027 gives 0640, readable by the group only), artifacts and sequences alike."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            umask = next(int(line.split()[1], 8) for line in fh if line.startswith("Umask:"))
+    except (OSError, StopIteration, ValueError, IndexError):
+        umask = os.umask(0o022)  # no /proc: read it by setting it (then put it back)
+        os.umask(umask)
+    return 0o666 & ~umask
 
 
 def check_name(name: str) -> str:
@@ -79,7 +95,12 @@ class ArtifactStore:
 
     def new_staging_dir(self, prefix: str = "upload-") -> Path:
         """A fresh, empty, uniquely named directory in :meth:`staging_dir`."""
-        return Path(tempfile.mkdtemp(prefix=prefix, dir=self.staging_dir()))
+        try:
+            return Path(tempfile.mkdtemp(prefix=prefix, dir=self.staging_dir()))
+        except OSError as exc:
+            if disk_full(exc):
+                raise insufficient_storage("starting the upload") from exc
+            raise
 
     def install_sequence(self, src: Path, seq_id: str) -> Path:
         """Move a staged sequence folder to :meth:`sequence_dir` (a rename on the same filesystem)."""
@@ -116,6 +137,7 @@ class ArtifactStore:
         target = folder / check_name(name)
         fd, tmp = tempfile.mkstemp(prefix=_TMP_PREFIX, dir=folder)
         try:
+            os.fchmod(fd, file_mode())  # mkstemp's 0600 would hide the file from an api of another user
             with os.fdopen(fd, str(mode), encoding="utf-8" if mode == "w" else None) as fh:
                 yield fh
                 fh.flush()
@@ -144,20 +166,36 @@ class ArtifactStore:
     def path(self, job_id: str, name: str) -> Path:
         """The path of an existing artifact, for reading or serving; :class:`NotFound` otherwise."""
         path = self.job_dir(job_id) / check_name(name)
-        if not path.is_file():
+        try:
+            is_file = stat.S_ISREG(os.stat(path).st_mode)
+        except (FileNotFoundError, NotADirectoryError):
+            is_file = False
+        except OSError as exc:  # the job's folder is not ours to read: say so, not "no such artifact"
+            raise _unreadable(f"job {job_id}'s artifact {name!r}", exc) from exc
+        if not is_file:
             raise NotFound(f"job {job_id} has no artifact {name!r}", {"job_id": job_id, "name": name})
         return path
 
     def list(self, job_id: str) -> builtins.list[ArtifactInfo]:
         """A job's finished artifacts by name (empty if it has none yet)."""
         folder = self.job_dir(job_id)
-        if not folder.is_dir():
+        found = []
+        try:
+            with os.scandir(folder) as entries:
+                for entry in entries:
+                    if entry.name.startswith("."):
+                        continue
+                    try:
+                        st = entry.stat()
+                    except FileNotFoundError:  # replaced or deleted while listing
+                        continue
+                    if stat.S_ISREG(st.st_mode):
+                        found.append(ArtifactInfo(entry.name, st.st_size))
+        except (FileNotFoundError, NotADirectoryError):
             return []
-        return [
-            ArtifactInfo(p.name, p.stat().st_size)
-            for p in sorted(folder.iterdir())
-            if p.is_file() and not p.name.startswith(".")
-        ]
+        except OSError as exc:  # a folder the api may not read: a clear error, not a 500
+            raise _unreadable(f"job {job_id}'s artifacts", exc) from exc
+        return sorted(found, key=lambda a: a.name)
 
     # -- deletion ---------------------------------------------------------------------------------
 
@@ -174,6 +212,11 @@ class ArtifactStore:
 
     def delete_sequence(self, seq_id: str) -> None:
         shutil.rmtree(self.sequence_dir(seq_id), ignore_errors=True)
+
+
+def _unreadable(what: str, exc: OSError) -> Unreadable:
+    return Unreadable(f"the server cannot read {what} ({exc.strerror or exc}); check the data dir's permissions",
+                      {"errno": exc.errno})
 
 
 def make_artifact_store(settings: Settings) -> ArtifactStore:

@@ -60,3 +60,25 @@ class ConfigurationError(StorageError):
 
     code = "configuration_error"
     http_status = 500
+
+
+class Unreadable(StorageError):
+    """A stored file the service cannot read (an api and a worker under different users on shared storage,
+    a restore with the wrong owner): the operator's fault, answered in words, never as a truncated file."""
+
+    code = "artifact_unreadable"
+    http_status = 500
+
+
+class InsufficientStorage(StorageError):
+    """The data dir's disk or the database is full: nothing was stored; free space and try again."""
+
+    code = "insufficient_storage"
+    http_status = 507
+
+
+class RequestTimeout(StorageError):
+    """A request took longer than the service allows (an upload that trickles in): nothing was stored."""
+
+    code = "request_timeout"
+    http_status = 408

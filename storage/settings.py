@@ -42,6 +42,10 @@ class Settings(BaseSettings):
     max_files: int = Field(default=200_000, gt=0)
     max_ratio: float = Field(default=200.0, gt=0)
     """Largest unpacked/packed size ratio accepted for an archive (zip-bomb guard)."""
+    upload_max_seconds: float = Field(default=3600.0, gt=0)
+    """Longest an upload's body may take to arrive (``VTD_UPLOAD_MAX_SECONDS``); beyond, a 408 and nothing
+    is stored. Bounds a client that trickles bytes just fast enough to dodge the idle timeout (4 GiB in an
+    hour needs about 1.2 MB/s)."""
 
     db_pool_size: int = Field(default=10, ge=1, le=1000)
     db_max_overflow: int = Field(default=30, ge=0, le=1000)

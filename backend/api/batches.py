@@ -27,7 +27,7 @@ TABLE_COLUMNS = list(TableRow.model_fields)
     status_code=status.HTTP_201_CREATED,
     response_model=BatchOut,
     dependencies=[Auth],
-    responses=error_responses(400, 401, 404, 413, 422, 503),
+    responses=error_responses(400, 401, 404, 413, 422, 503, 507),
 )
 def create_batch(body: BatchCreate, session: SessionDep, enqueue: EnqueueDep) -> BatchOut:
     """One job per sequence x preset, all queued."""

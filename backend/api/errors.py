@@ -22,7 +22,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from backend.api.edge import REQUEST_ID_HEADER, request_id_of
-from storage.errors import ServiceError, Unauthorized
+from storage.errors import InsufficientStorage, ServiceError, StorageError, Unauthorized, Unreadable
 from storage.redact import redact_paths
 
 log = logging.getLogger("backend.api")
@@ -34,6 +34,7 @@ _HTTP_CODES = {
     404: "not_found",
     405: "method_not_allowed",
     406: "not_acceptable",
+    408: "request_timeout",
     409: "conflict",
     411: "length_required",
     413: "payload_too_large",
@@ -42,6 +43,7 @@ _HTTP_CODES = {
     422: "invalid_input",
     429: "too_many_requests",
     431: "headers_too_large",
+    507: "insufficient_storage",
 }
 
 
@@ -133,6 +135,14 @@ def install_error_handlers(app: FastAPI) -> None:
         if exc.http_status >= 500:
             log.error("request %s: %s", request_id_of(request.scope), exc.message)
         return respond(request, exc.http_status, exc.code, exc.message, exc.detail, headers)
+
+    @app.exception_handler(Unreadable)
+    @app.exception_handler(InsufficientStorage)
+    async def _operator_error(request: Request, exc: StorageError) -> JSONResponse:
+        """Server-side conditions the operator must fix (a full disk, files it cannot read): said in words,
+        since they carry no SQL (paths are redacted like every message)."""
+        log.error("request %s: %s", request_id_of(request.scope), exc.message, exc_info=exc.__cause__)
+        return respond(request, exc.http_status, exc.code, exc.message, exc.detail)
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -15,6 +15,7 @@ from starlette.concurrency import run_in_threadpool
 
 from backend.api.deps import Offset, SessionDep, StoreDep
 from backend.api.errors import error_responses
+from backend.api.files import serve_file
 from backend.api.schemas import ArtifactName, ArtifactOut, FrameOut, JobId, JobOut, Page
 from storage.errors import NotFound
 from storage.repositories import jobs, metrics
@@ -40,7 +41,7 @@ def content_type(name: str) -> str:
     return CONTENT_TYPES.get(name[dot:].lower() if dot >= 0 else "", "application/octet-stream")
 
 
-@router.get("/{job_id}/artifacts", response_model=list[ArtifactOut], responses=error_responses(404))
+@router.get("/{job_id}/artifacts", response_model=list[ArtifactOut], responses=error_responses(404, 500))
 def list_artifacts(job_id: JobId, session: SessionDep, store: StoreDep) -> list[ArtifactOut]:
     """The job's finished outputs (trajectory.txt, keyframes.txt, map.ply, metrics.json, config.json,
     frame_stats.csv, log.txt, preview.png)."""
@@ -62,15 +63,18 @@ def list_artifacts(job_id: JobId, session: SessionDep, store: StoreDep) -> list[
     responses={
         200: {"description": "the file", "content": {t: {} for t in _MEDIA_TYPES}},
         206: {"description": "the requested byte range (send `Range: bytes=a-b`)"},
-        **error_responses(404, 416, 422),
+        **error_responses(404, 416, 422, 500),
     },
 )
-def get_artifact(job_id: JobId, name: ArtifactName, session: SessionDep, store: StoreDep) -> FileResponse:
-    """Download one artifact; ``Range`` requests are honoured (large point clouds resume)."""
+def get_artifact(
+    job_id: JobId, name: ArtifactName, request: Request, session: SessionDep, store: StoreDep
+) -> FileResponse:
+    """Download one artifact; ``Range`` requests are honoured (large point clouds resume), ``HEAD`` too."""
     jobs.get(session, job_id)
     path = store.path(job_id, name)
     disposition = "inline" if content_type(name).startswith(("text/", "image/", "application/json")) else "attachment"
-    return FileResponse(path, media_type=content_type(name), filename=name, content_disposition_type=disposition)
+    return serve_file(path, request, media_type=content_type(name), what=f"job {job_id}'s artifact {name!r}",
+                      filename=name, content_disposition_type=disposition)
 
 
 @router.get("/{job_id}/frames", response_model=Page[FrameOut], responses=error_responses(404, 422))

@@ -62,7 +62,7 @@ def check_config(config: dict[str, Any] | None) -> dict[str, Any] | None:
     status_code=status.HTTP_201_CREATED,
     response_model=JobOut,
     dependencies=[Auth],
-    responses=error_responses(400, 401, 404, 413, 422, 503),
+    responses=error_responses(400, 401, 404, 413, 422, 503, 507),
 )
 def create_job(body: JobCreate, session: SessionDep, enqueue: EnqueueDep) -> JobOut:
     """Queue a run of a sequence under a preset, with optional config overrides."""

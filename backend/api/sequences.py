@@ -15,6 +15,7 @@ from starlette.concurrency import run_in_threadpool
 
 from backend.api.deps import Auth, Limit, Offset, SessionDep, SettingsDep, StoreDep
 from backend.api.errors import error_responses
+from backend.api.files import serve_file
 from backend.api.guard import GuardedRoute
 from backend.api.schemas import Page, SequenceId, SequenceImport, SequenceOut
 from backend.api.upload import receive_upload
@@ -90,7 +91,7 @@ def _default_name(filename: str | None) -> str:
     response_model=SequenceOut,
     dependencies=[Auth],
     openapi_extra=_UPLOAD_BODY,
-    responses=error_responses(401, 409, 413, 422),
+    responses=error_responses(401, 408, 409, 413, 422, 507),
     summary="Upload a sequence archive",
 )
 async def upload_sequence(
@@ -104,7 +105,8 @@ async def upload_sequence(
     staging = store.new_staging_dir()
     sink = ArchiveSink(staging, upload_limits(settings))
     try:
-        form = await receive_upload(request, sink, file_field="file", max_bytes=settings.max_upload_bytes)
+        form = await receive_upload(request, sink, file_field="file", max_bytes=settings.max_upload_bytes,
+                                    max_seconds=settings.upload_max_seconds)
         await run_in_threadpool(sink.close)
         if "camera" not in form.fields:
             raise InvalidInput("the form needs a 'camera' field (a preset name or JSON intrinsics)")
@@ -171,18 +173,20 @@ def get_sequence(sequence_id: SequenceId, session: SessionDep) -> SequenceOut:
 @router.get(
     "/{sequence_id}/thumbnail",
     response_class=FileResponse,
-    responses={200: {"content": {"image/png": {}, "image/jpeg": {}}}, **error_responses(404)},
+    responses={200: {"content": {"image/png": {}, "image/jpeg": {}}}, **error_responses(404, 416, 500)},
 )
-def get_thumbnail(sequence_id: SequenceId, session: SessionDep, store: StoreDep) -> FileResponse:
+def get_thumbnail(sequence_id: SequenceId, request: Request, session: SessionDep, store: StoreDep) -> FileResponse:
     """The first frame's colour image, as stored."""
     seq = sequences.get(session, sequence_id)
     rel = seq.meta.get("thumbnail")
     root = store.resolve(seq.path).resolve()
     path = (root / rel).resolve() if rel else None
-    if path is None or not path.is_relative_to(root) or not path.is_file():
+    if path is None or not path.is_relative_to(root):  # serve_file: missing is 404, unreadable a clear 500
         raise NotFound(f"sequence {sequence_id} has no thumbnail", {"id": sequence_id})
     media = mimetypes.guess_type(path.name)[0] or "application/octet-stream"
-    return FileResponse(path, media_type=media, headers={"Cache-Control": "max-age=3600"})
+    return serve_file(path, request, media_type=media, what=f"sequence {sequence_id}'s thumbnail",
+                      missing=NotFound(f"sequence {sequence_id} has no thumbnail", {"id": sequence_id}),
+                      headers={"Cache-Control": "max-age=3600"})
 
 
 @router.delete(

@@ -9,15 +9,17 @@ at ``max_bytes``.
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
+import anyio
 from python_multipart.exceptions import FormParserError
 from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.concurrency import run_in_threadpool
 from starlette.requests import ClientDisconnect, Request
 
-from storage.errors import InvalidInput, PayloadTooLarge
+from storage.errors import InvalidInput, PayloadTooLarge, RequestTimeout
 
 WRITE_BLOCK = 4 << 20
 MAX_FIELD_BYTES = 64 * 1024
@@ -112,8 +114,13 @@ class _Receiver:
             self.form.fields[self._name] = value
 
 
-async def receive_upload(request: Request, sink: Sink, *, file_field: str, max_bytes: int) -> UploadedForm:
-    """Parse the multipart body of ``request``, handing the ``file_field`` part's bytes to ``sink``."""
+async def receive_upload(
+    request: Request, sink: Sink, *, file_field: str, max_bytes: int, max_seconds: float = math.inf
+) -> UploadedForm:
+    """Parse the multipart body of ``request``, handing the ``file_field`` part's bytes to ``sink``.
+
+    The whole body must arrive within ``max_seconds`` (:class:`RequestTimeout` otherwise), however steadily
+    it trickles: the connection's idle timeout only catches a body that stops."""
     ctype, options = parse_options_header(request.headers.get("content-type", ""))
     if ctype != b"multipart/form-data" or b"boundary" not in options:
         raise InvalidInput("the upload must be multipart/form-data", {"content_type": ctype.decode("latin-1")})
@@ -135,7 +142,11 @@ async def receive_upload(request: Request, sink: Sink, *, file_field: str, max_b
             "on_headers_finished",
         )
     }
-    parser = MultipartParser(options[b"boundary"], callbacks)  # type: ignore[arg-type]
+    try:  # python-multipart refuses boundaries over 256 characters (RFC 2046 allows 70) here, not in write()
+        parser = MultipartParser(options[b"boundary"], callbacks)  # type: ignore[arg-type]
+    except (FormParserError, ValueError) as exc:
+        detail = {"boundary_length": len(options[b"boundary"])}
+        raise InvalidInput(f"unusable multipart boundary: {exc}", detail) from None
     digest = hashlib.sha256()
 
     def write(block: bytes) -> None:  # in a worker thread: hashing 4 MiB would stall the event loop
@@ -143,13 +154,18 @@ async def receive_upload(request: Request, sink: Sink, *, file_field: str, max_b
         sink.write(block)
 
     try:
-        async for chunk in request.stream():
-            parser.write(chunk)
-            if len(rx.buffer) >= WRITE_BLOCK:
-                block = bytes(rx.buffer)
-                rx.buffer.clear()
-                await run_in_threadpool(write, block)
+        with anyio.fail_after(max_seconds if math.isfinite(max_seconds) else None):
+            async for chunk in request.stream():
+                parser.write(chunk)
+                if len(rx.buffer) >= WRITE_BLOCK:
+                    block = bytes(rx.buffer)
+                    rx.buffer.clear()
+                    await run_in_threadpool(write, block)
         parser.finalize()
+    except TimeoutError:
+        raise RequestTimeout(
+            f"the upload did not arrive within {max_seconds:g} s", {"max_seconds": max_seconds}
+        ) from None
     except ClientDisconnect:
         raise InvalidInput("the client disconnected during the upload") from None
     except FormParserError as exc:

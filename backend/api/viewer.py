@@ -94,8 +94,8 @@ def ask_hub(base: str, job_id: str, key: str | None = None, timeout: float = HUB
         if exc.code == 403:
             raise ViewerUnavailable("the 3D viewer refused the api's key: start the api and 'vtdslam viewer' "
                                     "with the same VTD_API_TOKEN", {"hub": base}) from None
-        if 400 <= exc.code < 500 and error:
-            raise HubRefused(exc.code, error) from None
+        if (400 <= exc.code < 500 or error.get("code") == "artifact_unreadable") and error:
+            raise HubRefused(exc.code, error) from None  # the hub's own words (a file it cannot read, …)
         raise ViewerUnavailable(f"the 3D viewer failed to open the run (HTTP {exc.code})", error) from None
     except (OSError, ValueError) as exc:  # refused, unreachable, timed out, not JSON
         reason = getattr(exc, "reason", exc)

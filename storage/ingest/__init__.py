@@ -14,6 +14,7 @@ from sqlalchemy.orm import Session
 
 from storage.artifacts import ArtifactStore
 from storage.errors import InvalidInput, NotFound, StorageError
+from storage.faults import disk_full, insufficient_storage
 from storage.ingest.archive import Limits, find_root, remove_tree, unpack
 from storage.ingest.sequence import SequenceInfo, validate_sequence
 from storage.models import Sequence, new_id
@@ -74,9 +75,11 @@ def ingest_staged(
             session, store, seq_id, installed, info,
             name=name, camera=camera, source="upload", content_sha256=content_sha256, claim=unique,
         )
-    except BaseException:
+    except BaseException as exc:
         if installed is not None:
             store.delete_sequence(seq_id)
+        if not isinstance(exc, StorageError) and disk_full(exc):  # unpacking or installing filled the disk
+            raise insufficient_storage("unpacking the upload") from exc
         raise
     finally:
         remove_tree(staging)
@@ -164,4 +167,6 @@ def _record(
     except StorageError:
         raise
     except Exception as exc:  # the database refused: surface it, the caller cleans the files
+        if disk_full(exc):
+            raise insufficient_storage("recording the sequence") from exc
         raise StorageError(f"could not record the sequence: {exc}") from exc

@@ -14,6 +14,7 @@ import threading
 from pathlib import Path
 from typing import IO
 
+from storage.faults import disk_full, insufficient_storage
 from storage.ingest.archive import Limits, Unpacked, unpack_tar_stream
 
 QUEUE_BLOCKS = 4
@@ -70,6 +71,14 @@ class ArchiveSink:
         return self._reader is not None
 
     def write(self, block: bytes) -> None:
+        try:
+            self._write(block)
+        except OSError as exc:
+            if disk_full(exc):
+                raise insufficient_storage("receiving the upload") from exc
+            raise
+
+    def _write(self, block: bytes) -> None:
         if not block:
             return
         if self._file is None and self._reader is None:
@@ -91,7 +100,12 @@ class ArchiveSink:
 
     def close(self) -> None:
         if self._file is not None:
-            self._file.close()
+            try:
+                self._file.close()  # flushes the last buffered bytes
+            except OSError as exc:
+                if disk_full(exc):
+                    raise insufficient_storage("receiving the upload") from exc
+                raise
             return
         if self._reader is None:  # nothing arrived
             (self.staging / "archive").touch()
@@ -144,4 +158,6 @@ class ArchiveSink:
 
     def _raise_if_failed(self) -> None:
         if self._error is not None:
+            if disk_full(self._error):
+                raise insufficient_storage("unpacking the upload") from self._error
             raise self._error

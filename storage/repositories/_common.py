@@ -8,7 +8,8 @@ from typing import TypeVar
 
 from sqlalchemy.orm import Session
 
-from storage.errors import InvalidInput, NotFound
+from storage.errors import InsufficientStorage, InvalidInput, NotFound
+from storage.faults import disk_full, insufficient_storage
 from storage.models import Base
 
 M = TypeVar("M", bound=Base)
@@ -22,8 +23,10 @@ def writing(session: Session) -> Iterator[None]:
     try:
         yield
         session.commit()
-    except BaseException:
+    except BaseException as exc:
         session.rollback()
+        if not isinstance(exc, InsufficientStorage) and disk_full(exc):  # a 507, not an unexpected error
+            raise insufficient_storage("writing to the database") from exc
         raise
 
 

@@ -26,6 +26,7 @@ from tests.webui.test_viewer import write_run
 
 HOST = "127.0.0.2"
 SCENE_TIMEOUT_MS = 60_000  # viser's first scene messages; SwiftShader and a shared CPU are slow
+SESSION_HOLD_S = 65  # past six of the api's 10 s header timeouts (issue 60.1: a reconnect every 10 s)
 
 pytestmark = pytest.mark.slow
 
@@ -110,6 +111,34 @@ def test_the_runs_viewer_opens_through_the_apis_origin(page, service: ServicePro
     pg.wait_for_timeout(2000)  # let the first frames render before judging the console
     pg.screenshot(path=str(shots / "viewer_through_api_origin.png"))
     assert not _off_origin(requested + sockets, service)
+    assert not errors, errors
+
+
+def test_a_viewer_session_through_the_api_holds_a_minute(page, service: ServiceProcesses, job_id: str) -> None:
+    """One socket for the whole session: never closed, never reopened (the page's reconnects would open more)."""
+    pg, errors, _requested = page
+    sockets: list[str] = []
+    closed: list[str] = []
+    frames: list[float] = []
+
+    def on_socket(ws) -> None:  # noqa: ANN001 (Playwright's WebSocket)
+        sockets.append(ws.url)
+        ws.on("close", lambda w: closed.append(w.url))
+        ws.on("socketerror", lambda err: closed.append(f"error: {err}"))
+        ws.on("framereceived", lambda _payload: frames.append(time.monotonic()))
+
+    pg.on("websocket", on_socket)
+    pg.goto(f"{service.base}/viewer/{job_id}/", wait_until="load")
+    deadline = time.monotonic() + SCENE_TIMEOUT_MS / 1000
+    while not frames and time.monotonic() < deadline:
+        pg.wait_for_timeout(250)
+    assert frames, f"no scene message through the proxy; sockets {sockets}, errors {errors}\n{service.tail()}"
+    opened = time.monotonic()
+    while time.monotonic() - opened < SESSION_HOLD_S:
+        pg.wait_for_timeout(1000)
+        assert not closed, f"the viewer's socket closed after {time.monotonic() - opened:.1f} s: {closed}"
+    assert sockets == [f"ws://{HOST}:{service.port}/viewer/{job_id}"], sockets  # zero reconnects
+    pg.get_by_text(f"Run {job_id[:8]}", exact=True).wait_for(timeout=5_000)  # the scene is still live
     assert not errors, errors
 
 

@@ -38,3 +38,15 @@ def test_read_list_missing_and_not_utf8(tmp_path: Path):
     (tmp_path / "rgb.txt").write_bytes(b"1.0 \xff.png\n")
     with pytest.raises(FormatError, match="not UTF-8"):
         read_list(tmp_path / "rgb.txt")
+
+
+@pytest.mark.parametrize(("text", "line"), [
+    ("1.0 rgb/a.png\n1.0 rgb/b.png\n", 2),
+    ("# x\n2.0 rgb/a.png\n1.0 rgb/b.png\n2.0 rgb/c.png\n", 4),
+    ("100000000000000000.1 rgb/a.png\n100000000000000000.2 rgb/b.png\n", 2),  # 1e17 + t: equal in float64
+])
+def test_repeated_timestamps_are_refused_naming_the_line(text, line):
+    """Issue 60.6: equal timestamps made a sequence of duration 0 and a run nothing can evaluate."""
+    with pytest.raises(FormatError, match="strictly increase") as info:
+        parse_list(text, "depth.txt")
+    assert info.value.line == line and str(info.value).startswith(f"depth.txt:{line}:")

@@ -25,7 +25,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import TYPE_CHECKING, Any
 
 from storage.artifacts import ArtifactStore
-from storage.errors import StorageError
+from storage.errors import StorageError, Unreadable
 from webui.viewer.run_data import load_run
 from webui.viewer.scene import build_scene
 
@@ -86,7 +86,13 @@ class ViewerHub:
             if job_id in self._servers:
                 self._servers.move_to_end(job_id)
                 return self._address(self._servers[job_id])
-            data = load_run(self.store.job_dir(job_id))  # NotFound if the run has no trajectory
+            try:
+                data = load_run(self.store.job_dir(job_id))  # NotFound if the run has no trajectory
+            except OSError as exc:  # files of another user on shared storage, an I/O error
+                raise Unreadable(
+                    f"the 3D viewer cannot read run {job_id}'s files ({exc.strerror or exc}); "
+                    "check the data dir's permissions", {"errno": exc.errno},
+                ) from exc
             self._evict()
             server = viser.ViserServer(host=self.config.run_host, port=0, label=f"VTD-SLAM run {job_id[:8]}",
                                        verbose=False)
@@ -162,7 +168,12 @@ def _handler(hub: ViewerHub) -> type[BaseHTTPRequestHandler]:
                 try:
                     run = hub.open_run(parts[1])
                 except StorageError as exc:
+                    if exc.http_status >= 500:
+                        log.error("run %s: %s", parts[1], exc.message, exc_info=exc.__cause__)
                     return self._send(exc.http_status, {"error": exc.to_dict()})
+                except Exception:  # answered, so the api says "failed", not "the viewer is not running"
+                    log.exception("could not open run %s", parts[1])
+                    return self._error(500, "viewer_error", "the 3D viewer failed to open the run; see its log")
                 return self._send(200, {"job_id": parts[1], "host": run.host, "port": run.port})
             self._error(404, "not_found", "no such path")
 

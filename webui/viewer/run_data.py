@@ -7,6 +7,8 @@ PLY with float x y z and uchar red green blue), `frame_stats.csv` (formats.frame
 """
 from __future__ import annotations
 
+import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -71,17 +73,25 @@ def _ate_errors(run_dir: Path, stamps: np.ndarray) -> np.ndarray | None:
     return np.array([by_time.get(round(t, 4), np.nan) for t in stamps])
 
 
+def _is_file(path: Path) -> bool:
+    """``Path.is_file`` that lets a PermissionError through (it would say "no such file")."""
+    try:
+        return stat.S_ISREG(os.stat(path).st_mode)
+    except (FileNotFoundError, NotADirectoryError):
+        return False
+
+
 def load_run(run_dir: Path, max_points: int = 400_000) -> RunData:
     """Read a run's artifacts; the map is subsampled to `max_points` so the browser stays responsive."""
     traj = run_dir / artifacts.TRAJECTORY
-    if not traj.is_file():
+    if not _is_file(traj):
         raise NotFound(f"run has no trajectory yet ({run_dir.name})")
     data = RunData(read_tum(traj))
-    if (run_dir / artifacts.GROUNDTRUTH_ALIGNED).is_file():
+    if _is_file(run_dir / artifacts.GROUNDTRUTH_ALIGNED):
         data.groundtruth = read_tum(run_dir / artifacts.GROUNDTRUTH_ALIGNED)
-    if (run_dir / artifacts.KEYFRAMES).is_file():
+    if _is_file(run_dir / artifacts.KEYFRAMES):
         data.keyframes = read_tum(run_dir / artifacts.KEYFRAMES)
-    if (run_dir / artifacts.MAP).is_file():
+    if _is_file(run_dir / artifacts.MAP):
         pts, cols = _read_map(run_dir / artifacts.MAP)
         if len(pts) > max_points:
             keep = np.random.default_rng(0).choice(len(pts), max_points, replace=False)

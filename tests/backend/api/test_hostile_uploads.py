@@ -484,3 +484,32 @@ def test_disconnect_mid_upload_is_a_clear_422() -> None:
         body = b"".join(m.get("body", b"") for m in sent if m["type"] == "http.response.body")
         assert start["status"] == 422 and b"disconnected during the upload" in body
         assert residue(settings.data_dir) == []
+
+
+@pytest.mark.parametrize("length", [257, 4000])
+def test_an_overlong_multipart_boundary_is_422(make_client, seq_tgz, length: int) -> None:
+    """Issue 60.2: python-multipart refuses boundaries over 256 characters when the parser is made (a 500)."""
+    client, settings = make_client()
+    boundary = "b" * length
+    body = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"camera\"\r\n\r\ntum1\r\n"
+            f"--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"s.tgz\"\r\n\r\n"
+            ).encode() + seq_tgz + f"\r\n--{boundary}--\r\n".encode()
+    r = client.post("/api/v1/sequences", content=body,
+                    headers={"content-type": f"multipart/form-data; boundary={boundary}"})
+    assert_clean_rejection(client, settings, r, 422, "boundary")
+
+
+@pytest.mark.parametrize("list_name", ["rgb.txt", "depth.txt"])
+def test_repeated_timestamps_are_422_naming_file_and_line(make_client, seq_folder, tmp_path, list_name) -> None:
+    """Issue 60.6: every line at the same time uploaded fine (duration 0) and made an unevaluable run."""
+    client, settings = make_client()
+    folder = tmp_path / "dup"
+    shutil.copytree(seq_folder, folder)
+    lines = (folder / list_name).read_text().splitlines()
+    stamp = lines[1].split()[0]
+    lines[3] = f"{stamp} {lines[3].split()[1]}"  # the third frame repeats the first one's timestamp
+    (folder / list_name).write_text("\n".join(lines) + "\n")
+    r = upload(client, tar_gz(folder, tmp_path / "dup.tgz").read_bytes())
+    assert_clean_rejection(client, settings, r, 422, f"{list_name}:4: timestamp")
+    assert "strictly increase" in r.json()["error"]["message"]
+    assert r.json()["error"]["detail"] == {"file": list_name, "line": 4}

@@ -72,3 +72,45 @@ def test_a_stalled_body_loses_its_connection(port) -> None:
         except ConnectionResetError:
             out = b""
     assert not out.startswith(b"HTTP/1.1 2"), out  # closed (or refused), never served
+
+
+@pytest.fixture
+def echo_run(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """A WebSocket echo server standing in for a run's viser server; the api's proxy is pointed at it."""
+    import threading
+
+    from websockets.sync.server import serve as ws_serve
+
+    from backend.api import viewer_proxy
+    from backend.api.viewer import RunAddress
+
+    def echo(conn) -> None:  # noqa: ANN001 (websockets' ServerConnection)
+        for message in conn:
+            conn.send(message)
+
+    with ws_serve(echo, "127.0.0.1", 0) as server:
+        port = server.socket.getsockname()[1]
+        monkeypatch.setattr(viewer_proxy, "open_run", lambda _settings, _job: RunAddress("127.0.0.1", port))
+        thread = threading.Thread(target=server.serve_forever, daemon=True)
+        thread.start()
+        yield
+        server.shutdown()
+
+
+def test_a_websocket_session_outlives_the_header_timeout(port, echo_run) -> None:
+    """Issue 60.1: after the upgrade the header timer kept running and wrote a 408 into the live socket
+    (the 3D viewer reconnected every 10 s). Held for 6x the header timeout: no close, every echo back."""
+    from websockets.sync.client import connect
+
+    hold_s = 6 * QuickProtocol.header_timeout_s
+    sent = received = 0
+    with connect(f"ws://127.0.0.1:{port}/viewer/job1", open_timeout=10, close_timeout=2) as ws:
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < hold_s:
+            ws.send(f"ping {sent}")
+            sent += 1
+            assert ws.recv(timeout=5) == f"ping {sent - 1}"
+            received += 1
+            time.sleep(0.1)
+        ws.ping().wait(5)
+    assert sent == received and sent > 10
