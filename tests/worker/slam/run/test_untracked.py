@@ -72,3 +72,17 @@ def test_a_fully_tracked_run_has_no_warning(tmp_path, room):
     assert res.tracked.all() and res.metrics["warnings"] == [] and res.metrics["tracked_fraction"] == 1.0
     head = (tmp_path / "out" / "trajectory.txt").read_text().splitlines()[0]
     assert head == "# VTD-SLAM trajectory T_WC (every frame)"
+
+
+def test_a_frame_lost_mid_run_has_no_pose(tmp_path):
+    """The view jumps to the opposite wall: that frame is lost (it starts a new map), the next one tracks."""
+    from tests.worker.slam.synthetic_room import pose
+
+    behind = pose([0.1, 0.0, 0.2], 180)
+    poses = np.concatenate([trajectory(6, yaw_span_deg=5), [behind, behind @ pose([0.01, 0.0, 0.005], 0.5)]])
+    seq = Sequence(write_sequence(tmp_path / "seq", poses))
+    res = run_pipeline(seq, get_preset("orb-only", {"dense.enabled": False}), tmp_path / "out")
+    assert res.tracked.tolist() == [True] * 6 + [False, True]
+    written = read_tum_trajectory(tmp_path / "out" / "trajectory.txt")
+    assert np.allclose(written.timestamps, np.delete(seq.timestamps, 6), atol=1e-6)
+    assert "frames 6..6" in res.metrics["warnings"][0]
