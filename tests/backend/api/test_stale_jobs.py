@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from datetime import timedelta
 from pathlib import Path
+from typing import Any, cast
 
 import pytest
 from fastapi.testclient import TestClient
@@ -37,7 +38,8 @@ def _app(tmp_path: Path, url: str | None, queue: RecordingQueue, **settings) -> 
 
 def _running(client: TestClient, worker: str, silent_s: float) -> str:
     """A job claimed by `worker`, whose last heartbeat was `silent_s` ago, with half a result stored."""
-    with client.app.state.session_factory() as s:
+    state = cast(Any, client.app).state
+    with state.session_factory() as s:
         seq = sequences.create(s, name=worker, path=f"sequences/{worker}", frames=100, camera={"preset": "tum1"})
         job = jobs.create(s, sequence_id=seq.id, preset="orb-only")
         assert jobs.claim(s, job.id, worker)
@@ -45,7 +47,7 @@ def _running(client: TestClient, worker: str, silent_s: float) -> str:
         metrics.save_run_metrics(s, job.id, {"fps": 1.0})
         s.execute(update(Job).where(Job.id == job.id).values(heartbeat_at=utcnow() - timedelta(seconds=silent_s)))
         s.commit()
-    client.app.state.store.write_text(job.id, "trajectory.txt", "half\n")
+    state.store.write_text(job.id, "trajectory.txt", "half\n")
     return job.id
 
 
