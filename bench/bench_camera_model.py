@@ -239,7 +239,7 @@ def depth_pose_graph(seq: Sequence, est_traj: Trajectory, est: dict[int, np.ndar
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sequence", required=True, help="DIR:CAMERA")
-    ap.add_argument("--estimate", type=Path, help="a run's trajectory.txt (TUM format, every frame)")
+    ap.add_argument("--estimate", type=Path, help="a run's trajectory.txt (TUM format, its tracked frames)")
     ap.add_argument("--colour-focals", default="480,500,515,525,535,550,565,585,600")
     ap.add_argument("--depth-focals", default="525,555,585,615")
     ap.add_argument("--pose-graph", action="store_true", help="with --estimate: the depth-edge pose graph test")

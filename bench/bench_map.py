@@ -54,12 +54,13 @@ def _backproject(depth: np.ndarray, keep: np.ndarray, K: np.ndarray, T_WC: np.nd
 def gt_in_map_world(seq, traj) -> dict[int, np.ndarray]:
     """Frame index -> 4x4 ground-truth T_WC in the estimate's (the map's) world, for the frames of the run
     `traj` (from frame 0) that have a ground-truth pose; rigid fit of whole poses (see the module doc)."""
-    from bench_slam import align_by_poses
+    from bench_slam import align_by_poses, poses_by_frame
 
     idx, gt = seq.groundtruth_for_frames()
-    keep = idx < len(traj)
+    est = poses_by_frame(seq, traj)  # tracked frames only: matched by timestamp
+    keep = np.array([int(i) in est for i in idx], dtype=bool)
     idx, gt = idx[keep], gt[keep]
-    R, t = align_by_poses(gt, traj.poses[idx])
+    R, t = align_by_poses(gt, np.stack([est[int(i)] for i in idx]))
     A_inv = np.eye(4)  # gt world -> estimate world
     A_inv[:3, :3], A_inv[:3, 3] = R.T, -R.T @ t
     return {int(i): A_inv @ T for i, T in zip(idx, gt)}
@@ -88,10 +89,12 @@ def reference_people(seq, traj, teacher: Path, every: int, cache: Path, stride: 
     spills a few pixels past the silhouette, and there the depth is the wall behind, which would count the
     walls people walked past as people."""
     import cv2
+    from bench_slam import poses_by_frame
 
     from worker.slam.segmentation.reference_masks import ReferenceRecipe, reference_masks
 
-    frames = list(range(0, min(len(traj), len(seq)), every))
+    est = poses_by_frame(seq, traj)  # tracked frames only: matched by timestamp
+    frames = [i for i in range(0, len(seq), every) if i in est]
     masks = reference_masks([seq.frames[i].rgb_path for i in frames], ReferenceRecipe(teacher), cache)
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * erode_px + 1, 2 * erode_px + 1))
     pts = []
@@ -99,7 +102,7 @@ def reference_people(seq, traj, teacher: Path, every: int, cache: Path, stride: 
         ref = np.asarray(cv2.imread(str(m), cv2.IMREAD_UNCHANGED))
         person = cv2.erode((ref == 1).astype(np.uint8), disc) > 0
         pts.append(_backproject(seq[i].depth[::stride, ::stride], person[::stride, ::stride], seq.camera.K,
-                                traj.poses[i], stride))
+                                est[i], stride))
     return np.vstack(pts) if pts else np.zeros((0, 3))
 
 
@@ -129,7 +132,7 @@ def check(seq_dir: Path, camera: str, run: Path, references: tuple[Path, int, Pa
     if people is not None:
         near = cKDTree(people).query(X, k=1)[0] < NEAR_M if len(people) else np.zeros(len(xyz), bool)
     kf_stamps = read_tum_trajectory(run / "keyframes.txt").timestamps
-    kf_frames = {int(i) for i in np.flatnonzero(np.isin(np.round(traj.timestamps, 6), np.round(kf_stamps, 6)))}
+    kf_frames = {int(i) for i in np.flatnonzero(np.isin(np.round(seq.timestamps, 6), np.round(kf_stamps, 6)))}
     metrics = read_run_metrics(run / artifacts.METRICS)
     near_share = float(near.mean()) if near is not None and len(xyz) else None
     on_share = float((near & off_static).mean()) if near is not None and off_static is not None and len(xyz) else None

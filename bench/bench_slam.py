@@ -109,6 +109,18 @@ def align_by_poses(gt: np.ndarray, est: np.ndarray) -> tuple[np.ndarray, np.ndar
     return R, (gt[:, :3, 3] - est[:, :3, 3] @ R.T).mean(0)
 
 
+def poses_by_frame(seq, traj, tol_s: float = 1e-4) -> dict[int, np.ndarray]:
+    """Frame index of `seq` -> the estimated T_WC of `traj` (a run's trajectory: tracked frames only, so
+    matched by timestamp, never by position)."""
+    stamps = np.asarray(seq.timestamps, dtype=np.float64)
+    out = {}
+    for t, T in zip(traj.timestamps, traj.poses):
+        k = int(np.searchsorted(stamps, t - tol_s))  # the first frame not before t - tol_s: the only candidate
+        if k < len(stamps) and abs(stamps[k] - t) <= tol_s:
+            out[k] = T
+    return out
+
+
 def map_check(seq, traj, xyz: np.ndarray, kf_frames: set[int], start: int, n_views: int = 8) -> dict:
     """Distance of map points to the measured surface of held-out frames, placed at their GT poses.
 
@@ -119,9 +131,10 @@ def map_check(seq, traj, xyz: np.ndarray, kf_frames: set[int], start: int, n_vie
     from scipy.spatial import cKDTree
 
     idx, gt = seq.groundtruth_for_frames()
-    in_run = (idx >= start) & (idx < start + len(traj))
+    by_frame = poses_by_frame(seq, traj)  # the run's tracked frames (`start` is implied by the timestamps)
+    in_run = np.array([int(i) in by_frame for i in idx], dtype=bool)
     idx, gt = idx[in_run], gt[in_run]
-    est = traj.poses[idx - start]
+    est = np.stack([by_frame[int(i)] for i in idx]) if len(idx) else np.zeros((0, 4, 4))
     R, t = align_by_poses(gt, est)
     X_gt = xyz.astype(np.float64) @ R.T + t  # map in the ground-truth world
     X_est = xyz.astype(np.float64)

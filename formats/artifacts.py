@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 
 TRAJECTORY = "trajectory.txt"
-"""Every frame's pose, TUM format (formats.trajectory)."""
+"""Every tracked frame's pose, TUM format (formats.trajectory); a frame never tracked has none."""
 KEYFRAMES = "keyframes.txt"
 """The keyframes' poses, TUM format."""
 MAP = "map.ply"

@@ -52,6 +52,10 @@ def _dict(value: Any) -> dict[str, Any] | None:
     return dict(value) if isinstance(value, Mapping) else None
 
 
+def _strings(value: Any) -> list[str]:
+    return [v for v in value if isinstance(v, str)] if isinstance(value, list | tuple) else []
+
+
 @dataclass(frozen=True)
 class ErrorStats:
     """Statistics of a set of errors, in the unit its holder names (ATE: metres; RPE: per interval)."""
@@ -130,7 +134,7 @@ _COUNTS = ("frames", "tracked", "lost", "relocalisations", "new_maps", "map_merg
            "rescued_frames", "last_pose_retries", "frames_refit", "keyframes", "map_points", "fused_observations",
            "loops", "loops_applied")
 _CORE = (*_COUNTS, "fps", "tracking_fps", "tracking_cpu_ms", "timings_ms", "overlapped_stages", "dense_points",
-         "stage_info", "peak_rss_mb", "camera", "preset", "start")
+         "stage_info", "peak_rss_mb", "camera", "preset", "start", "tracked_fraction", "warnings")
 _EVALUATION = ("ate", "matched_poses", "rpe", "evaluation_error")
 
 
@@ -184,6 +188,10 @@ class RunMetrics:
     preset: str | None = None
     start: int | None = None
     """Index of the first frame processed."""
+    tracked_fraction: Number | None = None
+    """``tracked / frames`` (0..1): below 1, trajectory.txt holds only the tracked frames' poses."""
+    warnings: list[str] = field(default_factory=list)
+    """What a user should know about the result (frames that were not tracked, ...); empty when nothing."""
     stages: dict[str, dict[str, Any]] = field(default_factory=dict)
     """Each stage's summary by stage name (``culling``, ``restoration``), a stage's own shape; with truth a
     ``truth`` entry (see :meth:`truth_scores`)."""
@@ -214,7 +222,8 @@ class RunMetrics:
             overlapped_stages=list(overlapped) if isinstance(overlapped, list | tuple) else [],
             dense_points=_count(d.get("dense_points")), stage_info=_dict(d.get("stage_info")) or {},
             peak_rss_mb=number(d.get("peak_rss_mb")), camera=_dict(d.get("camera")) or {},
-            preset=preset if isinstance(preset, str) else None, start=_count(d.get("start")), stages=stages,
+            preset=preset if isinstance(preset, str) else None, start=_count(d.get("start")),
+            tracked_fraction=number(d.get("tracked_fraction")), warnings=_strings(d.get("warnings")), stages=stages,
             ate=ErrorStats.from_dict(d.get("ate")), matched_poses=_count(d.get("matched_poses")),
             rpe=RpeMetrics.from_dict(d.get("rpe")), evaluation_error=err if isinstance(err, str) else None,
             extra=extra,

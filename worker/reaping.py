@@ -4,9 +4,10 @@ files removed.
 
 Two ways to find them: on start a worker takes the jobs still running under its own name (its previous
 process died: see :mod:`worker.identity`), and every worker's reaper thread takes running jobs of any
-worker that has not reported for ``heartbeat_timeout_s`` (killed, machine lost). Their partial outputs
-(the staging folder of the run, artifacts of an interrupted save) are removed either way, so a failed
-job shows no half of a result and a requeued one starts clean.
+worker that has not reported for ``heartbeat_timeout_s`` (killed, machine lost; the api's reads do the
+same, so this needs no live worker). Their partial outputs (the staging folder of the run, artifacts of an
+interrupted save) are removed either way (``storage.reaping.settle``), so a failed job shows no half of a
+result and a requeued one starts clean.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import logging
 import threading
 from collections.abc import Callable
 
-from storage.models import JobStatus
+from storage.reaping import reap_stale_jobs, settle
 from storage.repositories import jobs
 from storage.repositories.jobs import Reaped
 from worker.tasks import WorkerContext
@@ -32,41 +33,15 @@ def reap_orphans(ctx: WorkerContext) -> Reaped:
             error=f"the worker ({ctx.name}) stopped before the job finished; retry it",
             requeue_limit=ctx.settings.requeue_orphans,
         )
-    _settle(ctx, reaped, f"was left running by a previous worker {ctx.name}")
+        settle(session, ctx.store, reaped, f"was left running by a previous worker {ctx.name}", ctx.enqueue)
     return reaped
 
 
 def reap_stale(ctx: WorkerContext, timeout_s: float) -> Reaped:
-    """Jobs of any worker that stopped reporting for ``timeout_s``."""
+    """Jobs of any worker that stopped reporting for ``timeout_s`` (the api's reads reap them too)."""
     with ctx.session_factory() as session:
-        reaped = jobs.reap_stale(session, older_than_s=timeout_s, requeue_limit=ctx.settings.requeue_orphans)
-    _settle(ctx, reaped, f"had no sign of its worker for {timeout_s:g} s")
-    return reaped
-
-
-def _settle(ctx: WorkerContext, reaped: Reaped, why: str) -> None:
-    for job_id in reaped.all:
-        ctx.store.delete_job(job_id)
-        ctx.store.delete_staging(f"job-{job_id}-")
-    for job_id in reaped.failed:
-        if job_id in reaped.poisoned:
-            log.error("job %s %s again: a poison job (its worker died on it twice), marked failed", job_id, why)
-        else:
-            log.warning("job %s %s: marked failed", job_id, why)
-    for job_id in reaped.requeued:  # the row is queued again; now the queue message (order matters)
-        log.warning("job %s %s: requeued", job_id, why)
-        try:
-            if ctx.enqueue is None:
-                raise RuntimeError("this worker has no queue to requeue on")
-            ctx.enqueue(job_id)
-        except Exception as exc:
-            log.error("job %s could not be requeued: %s", job_id, exc)
-            try:
-                with ctx.session_factory() as session:
-                    jobs.finish(session, job_id, JobStatus.FAILED,
-                                error=f"its worker died and requeueing it failed ({exc}); retry it")
-            except Exception as again:  # left queued without a message: a manual retry is needed
-                log.error("job %s: could not mark it failed either: %s", job_id, again)
+        return reap_stale_jobs(session, ctx.store, timeout_s=timeout_s, requeue_limit=ctx.settings.requeue_orphans,
+                               enqueue=ctx.enqueue)
 
 
 def start_reaper(

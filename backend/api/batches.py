@@ -14,6 +14,7 @@ from backend.api.errors import error_responses
 from backend.api.guard import GuardedRoute
 from backend.api.jobs import check_config, enqueue_or_fail
 from backend.api.schemas import BatchCreate, BatchId, BatchOut, Page, TableRow
+from backend.api.stale import ReapStale
 from storage.presets import check_preset
 from storage.repositories import batches
 
@@ -39,7 +40,7 @@ def create_batch(body: BatchCreate, session: SessionDep, enqueue: EnqueueDep) ->
     return BatchOut.of(batch, batches.jobs_of(session, batch.id))
 
 
-@router.get("", response_model=Page[BatchOut], responses=error_responses(422))
+@router.get("", response_model=Page[BatchOut], dependencies=[ReapStale], responses=error_responses(422))
 def list_batches(
     session: SessionDep,
     limit: Limit = 50,
@@ -50,7 +51,7 @@ def list_batches(
     return Page[BatchOut](items=out, total=None, limit=limit, offset=offset)
 
 
-@router.get("/{batch_id}", response_model=BatchOut, responses=error_responses(404))
+@router.get("/{batch_id}", response_model=BatchOut, dependencies=[ReapStale], responses=error_responses(404))
 def get_batch(batch_id: BatchId, session: SessionDep) -> BatchOut:
     return BatchOut.of(batches.get(session, batch_id), batches.jobs_of(session, batch_id))
 

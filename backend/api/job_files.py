@@ -6,7 +6,7 @@ import asyncio
 import json
 import time
 from collections.abc import AsyncIterator
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Request
 from fastapi.responses import FileResponse, StreamingResponse
@@ -17,6 +17,7 @@ from backend.api.deps import Offset, SessionDep, StoreDep
 from backend.api.errors import error_responses
 from backend.api.files import serve_file
 from backend.api.schemas import ArtifactName, ArtifactOut, FrameOut, JobId, JobOut, Page
+from backend.api.stale import reap_stale_with
 from storage.errors import NotFound
 from storage.repositories import jobs, metrics
 
@@ -118,7 +119,7 @@ async def job_events(
     open dashboards never starve the pool. A client may hold ``max_streams_per_client`` streams (429 beyond).
     """
     factory = request.app.state.session_factory
-    await run_in_threadpool(_snapshot, factory, job_id)  # 404 before the stream starts
+    await run_in_threadpool(_snapshot, factory, job_id, request.app.state)  # 404 before the stream starts
     slot = request.app.state.streams.acquire(_client_key(request))
 
     async def stream() -> AsyncIterator[str]:
@@ -139,9 +140,12 @@ def _client_key(request: Request) -> str:
     return request.client.host if request.client else "unknown"
 
 
-def _snapshot(factory: sessionmaker[Session], job_id: str) -> JobOut:
-    """The job as the client sees it, read in a session that is closed again before returning."""
+def _snapshot(factory: sessionmaker[Session], job_id: str, state: Any = None) -> JobOut:
+    """The job as the client sees it, read in a session that is closed again before returning; with the
+    app's ``state``, stale jobs reaped first (``backend.api.stale``)."""
     with factory() as session:
+        if state is not None:
+            reap_stale_with(state, session)
         return JobOut.of(jobs.get(session, job_id))
 
 
@@ -152,7 +156,7 @@ async def _events(
     yield "retry: 2000\n\n"
     while True:
         try:
-            out = await run_in_threadpool(_snapshot, factory, job_id)
+            out = await run_in_threadpool(_snapshot, factory, job_id, request.app.state)
         except NotFound:
             n += 1
             yield _sse("deleted", json.dumps({"id": job_id}), n)

@@ -13,6 +13,7 @@ from backend.api.deps import Auth, Enqueue, EnqueueDep, Limit, Offset, SessionDe
 from backend.api.errors import ApiError, error_responses
 from backend.api.guard import GuardedRoute
 from backend.api.schemas import JobCreate, JobId, JobOut, Page
+from backend.api.stale import ReapStale
 from storage.config_ranges import check_ranges
 from storage.errors import InvalidInput
 from storage.models import JobStatus
@@ -73,7 +74,7 @@ def create_job(body: JobCreate, session: SessionDep, enqueue: EnqueueDep) -> Job
     return JobOut.of(jobs.get(session, job.id))
 
 
-@router.get("", response_model=Page[JobOut], responses=error_responses(422))
+@router.get("", response_model=Page[JobOut], dependencies=[ReapStale], responses=error_responses(422))
 def list_jobs(
     session: SessionDep,
     status_: Annotated[JobStatus | None, Query(alias="status")] = None,
@@ -90,7 +91,7 @@ def list_jobs(
     )
 
 
-@router.get("/{job_id}", response_model=JobOut, responses=error_responses(404))
+@router.get("/{job_id}", response_model=JobOut, dependencies=[ReapStale], responses=error_responses(404))
 def get_job(job_id: JobId, session: SessionDep) -> JobOut:
     return JobOut.of(jobs.get(session, job_id))
 

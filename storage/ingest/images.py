@@ -160,3 +160,36 @@ def _jpeg(label: str, data: bytes, verify: bool) -> ImageInfo:
     if verify and (sos is None or data.rfind(b"\xff\xd9") < sos):
         raise _bad(label, "truncated JPEG (no end of image)")
     return info
+
+
+def png_is_blank(path: Path, *, label: str | None = None) -> bool:
+    """True when every sample of the PNG is 0 (a depth image with no valid pixel), decided on the filtered
+    data: a PNG row filter predicts 0 from zeros, so the pixels are all 0 exactly when every filtered byte
+    (row filter types aside) is. Decompresses in bounded pieces, to the size the header promises."""
+    label = label or path.name
+    data = path.read_bytes()
+    info = _png(label, data, verify=False)
+    interlace = data[28]
+    pos, idat = 8, []
+    while pos + 12 <= len(data):
+        (length,) = struct.unpack(">I", data[pos : pos + 4])
+        if data[pos + 4 : pos + 8] == b"IDAT":
+            idat.append(data[pos + 8 : pos + 8 + length])
+        pos += 12 + length
+    expected = _raw_size(info, interlace)
+    try:
+        raw = zlib.decompressobj().decompress(b"".join(idat), expected + 1)
+    except zlib.error as exc:
+        raise _bad(label, f"PNG data is corrupt ({exc})") from None
+    bpp = info.channels * info.bit_depth
+    passes = [(info.width, info.height)] if not interlace else [
+        ((info.width - x0 + dx - 1) // dx, (info.height - y0 + dy - 1) // dy) for x0, y0, dx, dy in _ADAM7]
+    offset = nonzero_filters = 0
+    for w, h in passes:
+        if w == 0 or h == 0:
+            continue
+        stride = 1 + (w * bpp + 7) // 8
+        filters = raw[offset : offset + stride * h : stride]
+        nonzero_filters += len(filters) - filters.count(0)
+        offset += stride * h
+    return len(raw) - raw.count(0) == nonzero_filters

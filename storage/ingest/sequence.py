@@ -4,7 +4,8 @@ Reads the files with the worker's own parsers (``formats``): ``rgb.txt`` and ``d
 ``timestamp relative/path`` lines, every listed file present inside the folder, colour/depth pairs
 associated like TUM's associate.py, an optional ``groundtruth.txt`` (``t tx ty tz qx qy qz qw``) and
 ``camera.json`` (plausible intrinsics), every frame's image headers checked (8-bit colour, 16-bit
-single-channel PNG depth, one size) and a sample's whole data verified.
+single-channel PNG depth, one size of at least :data:`MIN_SIZE`) and a sample's whole data verified, its
+depth images not all 0 (invalid).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from formats.errors import FormatError
 from formats.trajectory import parse_tum_trajectory
 from formats.tum_lists import parse_list
 from storage.errors import InvalidInput
-from storage.ingest.images import check_image
+from storage.ingest.images import check_image, png_is_blank
 from storage.jsonlimits import parse_json
 from storage.presets import check_intrinsics
 
@@ -28,6 +29,9 @@ PRESET_SIZE = (640, 480)  # every camera preset (storage.presets.CAMERA_PRESETS)
 MAX_GT_POSITION_M = 1e5
 """Ground-truth positions further from the origin than this (100 km) are refused as implausible."""
 MAX_LIST_BYTES = 64 * 1024 * 1024
+MIN_SIZE = (64, 48)
+"""Smallest image the pipeline tracks: ORB's 8-level pyramid and its 19-pixel border leave no feature in less
+(32x24 frames once ran 5000 frames to a "succeeded" job that tracked none)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,6 +157,7 @@ def validate_sequence(folder: Path, camera: dict[str, Any] | None = None, sample
     picks = sorted({round(k * (n - 1) / max(1, samples - 1)) for k in range(min(samples, n))})
     verified = set(picks)
     size: tuple[int, int] | None = None
+    blank_depth = 0  # sampled depth images without one valid (non-zero) pixel
     for k, (i, j) in enumerate(pairs):  # every frame's headers; a sample's whole data too
         verify = k in verified
         rgb_path, depth_path = folder / rgb[i][1], folder / depth[j][1]
@@ -166,8 +171,20 @@ def validate_sequence(folder: Path, camera: dict[str, Any] | None = None, sample
             raise _err(folder, depth_path, f"depth is {d.width}x{d.height} but colour is {c.width}x{c.height}")
         if size is not None and size != (c.width, c.height):
             raise _err(folder, rgb_path, f"image is {c.width}x{c.height} but earlier frames are {size[0]}x{size[1]}")
+        if size is None and (c.width < MIN_SIZE[0] or c.height < MIN_SIZE[1]):
+            raise InvalidInput(
+                f"images are {c.width}x{c.height}; the pipeline needs at least {MIN_SIZE[0]}x{MIN_SIZE[1]} pixels "
+                "(its ORB feature pyramid finds nothing in smaller ones)",
+                {"image_size": [c.width, c.height], "min_size": list(MIN_SIZE)},
+            )
         size = (c.width, c.height)
+        if verify and png_is_blank(depth_path, label=depth_path.relative_to(folder).as_posix()):
+            blank_depth += 1
     assert size is not None
+    if blank_depth == len(verified):
+        raise _err(folder, folder / "depth.txt",
+                   f"every sampled depth image ({blank_depth} of {n}) is all 0, i.e. has no valid depth; "
+                   "nothing can be tracked without depth (16-bit PNG, depth_scale units per metre, 0 = invalid)")
     _check_aspect(folder, size, camera_file or (camera if camera and "preset" not in camera else None))
     files, total = _disk_usage(folder)
     return SequenceInfo(

@@ -405,8 +405,18 @@ def reap_stale(
     requeue_limit: int = 0,
 ) -> Reaped:
     """Requeue or fail running jobs whose worker has not reported for ``older_than_s`` seconds."""
-    cutoff = utcnow() - timedelta(seconds=older_than_s)
-    return _reap(session, [func.coalesce(Job.heartbeat_at, Job.started_at) < cutoff], error, requeue_limit)
+    return _reap(session, [_silent_for(older_than_s)], error, requeue_limit)
+
+
+def any_stale(session: Session, *, older_than_s: float) -> bool:
+    """Whether :func:`reap_stale` would take a job: one read, so readers (the api) check before writing."""
+    stmt = select(Job.id).where(Job.status == JobStatus.RUNNING, _silent_for(older_than_s)).limit(1)
+    return session.scalar(stmt) is not None
+
+
+def _silent_for(seconds: float) -> ColumnElement[bool]:
+    """The job's last sign of life (heartbeat, else its start) is older than ``seconds``."""
+    return func.coalesce(Job.heartbeat_at, Job.started_at) < utcnow() - timedelta(seconds=seconds)
 
 
 def discard_results(session: Session, job_id: str) -> None:

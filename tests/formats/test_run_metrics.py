@@ -22,10 +22,11 @@ PIPELINE = {  # a metrics.json as run_pipeline writes it, key order included
     "tracking_cpu_ms": 18.885, "timings_ms": {"read": 0.396, "tracking": 33.5}, "overlapped_stages": ["culling"],
     "dense_points": 13879, "stage_info": {"features_removed": 23.1}, "peak_rss_mb": 731.9,
     "camera": {"fx": 535.4, "dist": [0.0, 0.0], "name": "synthetic"}, "preset": "full", "start": 0,
+    "tracked_fraction": 0.9667, "warnings": ["1 of 30 frames (3.3 %) were not tracked"],
     "culling": {"features_removed": 694, "truth": {"mask_iou": 0.17, "feature_precision": 0.85,
                                                    "feature_recall": 0.72, "frames_scored": {"mask": 29}}},
     "restoration": {"references": "both-sided", "truth": {"restoration_psnr": 20.5}},
-    "ate": STATS, "matched_poses": 30,
+    "ate": STATS, "matched_poses": 29,
     "rpe": {"mode": "fixed-delta", "delta_s": 1, "max_pairs": 0, "pairs": 12, "trans": STATS,
             "rot_deg": {**STATS, "rmse": 0.4}},
 }

@@ -55,6 +55,19 @@ def test_load_run_reads_every_artifact(tmp_path):
     assert np.allclose(data.trajectory.wxyz[0], [1, 0, 0, 0])  # TUM qx qy qz qw -> viser wxyz
 
 
+def test_a_run_with_lost_frames_maps_poses_to_frames_by_timestamp(tmp_path):
+    """trajectory.txt holds only tracked frames: pose k is not frame k; an empty keyframes.txt is no error."""
+    write_run(tmp_path / "r")
+    d = tmp_path / "r"
+    rows = np.loadtxt(d / "trajectory.txt")
+    np.savetxt(d / "trajectory.txt", np.delete(rows, [3, 4], axis=0))  # frames 3 and 4 were lost
+    (d / "keyframes.txt").write_text("# VTD-SLAM keyframes T_WC\n")
+    data = load_run(d)
+    assert len(data.trajectory.positions) == 48 and data.keyframes is None
+    assert data.frame_index is not None and data.frame_index[:4].tolist() == [0, 1, 2, 5]
+    assert data.ate_error[3] == pytest.approx(0.005)  # frame 5's, by timestamp
+
+
 def test_missing_run_is_not_found(tmp_path):
     with pytest.raises(NotFound):
         load_run(tmp_path / "nothing")

@@ -219,6 +219,27 @@ def test_real_pipeline_runs_a_generated_sequence(ctx, job_id):
     assert _job(ctx, job.id).config["name"] == "orb-only"
 
 
+def test_a_run_that_tracked_nothing_fails_with_the_reason(ctx, job_id):
+    """All-zero depth: no map can start. The job fails saying why, and stores no half result."""
+    cv2 = pytest.importorskip("cv2")
+    import numpy as np
+
+    from worker.runner import run_slam
+
+    seq = write_sequence(ctx.store.root / "sequences/s", n=5)
+    for depth in (seq / "depth").iterdir():
+        cv2.imwrite(str(depth), np.zeros((120, 160), np.uint16))
+    ctx.pipeline = run_slam
+    with ctx.session_factory() as s:
+        job = jobs.create(s, sequence_id=jobs.get(s, job_id).sequence_id, preset="orb-only")
+    assert execute_job(ctx, job.id) == JobStatus.FAILED
+    error = _job(ctx, job.id).error
+    assert error.startswith("no frame was tracked: 5 frames of 160x120") and "valid depth" in error
+    assert {a.name for a in ctx.store.list(job.id)} <= {"log.txt"}
+    with ctx.session_factory() as s:
+        assert metrics.get_frame_stats(s, job.id) == []
+
+
 def test_execute_job_is_thread_safe_for_two_workers(ctx, job_id):
     results = []
     threads = [threading.Thread(target=lambda: results.append(execute_job(ctx, job_id))) for _ in range(2)]

@@ -1,9 +1,11 @@
 """Everything the viewer shows of one run, read from the run's artifact folder (no pipeline import).
 
-Artifacts used (all optional except the trajectory): `trajectory.txt` (TUM, T_WC), `groundtruth_aligned.txt`
+Artifacts used (all optional except the trajectory): `trajectory.txt` (TUM, T_WC of the tracked frames: pose k
+is frame k only when no frame was lost, so frames are matched by timestamp), `groundtruth_aligned.txt`
 (TUM, ground truth expressed in the estimate's frame), `keyframes.txt` (TUM), `map.ply` (binary little-endian
-PLY with float x y z and uchar red green blue), `frame_stats.csv` (formats.frame_stats: `timestamp`, `ate_error`...),
-`frame_NNNNNN_{rgb,mask,restored}.jpg` (flat names: the artifact store keeps one folder per run).
+PLY with float x y z and uchar red green blue), `frame_stats.csv` (formats.frame_stats: `frame_index`,
+`timestamp`, `ate_error`...), `frame_NNNNNN_{rgb,mask,restored}.jpg` (flat names: the artifact store keeps one
+folder per run).
 """
 from __future__ import annotations
 
@@ -39,6 +41,9 @@ class RunData:
     points: np.ndarray | None = None  # (M, 3) float32
     colors: np.ndarray | None = None  # (M, 3) uint8
     ate_error: np.ndarray | None = None  # (N,) metres per trajectory pose, NaN where unknown
+    frame_index: np.ndarray | None = None
+    """(N,) int: the frame of each trajectory pose (trajectory.txt holds only tracked frames, so pose k is not
+    frame k when frames were lost), from the frame stats by timestamp; -1 where unknown."""
     previews: dict[int, dict[str, Path]] = field(default_factory=dict)
 
 
@@ -59,18 +64,20 @@ def _read_map(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
         raise NotFound(f"{path.name}: {exc.message}") from None
 
 
-def _ate_errors(run_dir: Path, stamps: np.ndarray) -> np.ndarray | None:
-    """Each pose's ATE error (m) from the run's frame stats (formats.frame_stats), matched by timestamp; None
-    without a readable file (the colours are optional)."""
+def _per_pose(run_dir: Path, stamps: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Each pose's ATE error (m) and frame index from the run's frame stats (formats.frame_stats), matched by
+    timestamp; (None, None) without a readable file (both are optional)."""
     path = run_dir / artifacts.FRAME_STATS
     try:
         rows = load_frame_stats(path) if path.is_file() else None
     except FormatError:
-        return None
+        return None, None
     if rows is None:
-        return None
-    by_time = {round(r.timestamp, 4): r.ate_error for r in rows if r.ate_error is not None}
-    return np.array([by_time.get(round(t, 4), np.nan) for t in stamps])
+        return None, None
+    errors = {round(r.timestamp, 4): r.ate_error for r in rows if r.ate_error is not None}
+    frames = {round(r.timestamp, 4): r.frame_index for r in rows}
+    return (np.array([errors.get(round(t, 4), np.nan) for t in stamps]),
+            np.array([frames.get(round(t, 4), -1) for t in stamps], dtype=np.int64))
 
 
 def _is_file(path: Path) -> bool:
@@ -90,14 +97,17 @@ def load_run(run_dir: Path, max_points: int = 400_000) -> RunData:
     if _is_file(run_dir / artifacts.GROUNDTRUTH_ALIGNED):
         data.groundtruth = read_tum(run_dir / artifacts.GROUNDTRUTH_ALIGNED)
     if _is_file(run_dir / artifacts.KEYFRAMES):
-        data.keyframes = read_tum(run_dir / artifacts.KEYFRAMES)
+        try:
+            data.keyframes = read_tum(run_dir / artifacts.KEYFRAMES)
+        except NotFound:  # an empty keyframes file (no keyframe): the rest of the run still shows
+            data.keyframes = None
     if _is_file(run_dir / artifacts.MAP):
         pts, cols = _read_map(run_dir / artifacts.MAP)
         if len(pts) > max_points:
             keep = np.random.default_rng(0).choice(len(pts), max_points, replace=False)
             pts, cols = pts[keep], (cols[keep] if cols is not None else None)
         data.points, data.colors = pts, cols
-    data.ate_error = _ate_errors(run_dir, data.trajectory.timestamps)
+    data.ate_error, data.frame_index = _per_pose(run_dir, data.trajectory.timestamps)
     for f in sorted(run_dir.glob("frame_*_*.*")):
         named = artifacts.parse_frame_image(f.name)
         if named is not None:

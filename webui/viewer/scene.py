@@ -123,7 +123,9 @@ def _frame_slider(server, data: RunData, fov_rad: float, aspect: float) -> None:
         i = int(slider.value)
         marker.position, marker.wxyz = traj.positions[i], traj.wxyz[i]
         if image is not None and kind is not None and frames:
-            nearest = min(frames, key=lambda f: abs(f - i))
+            # pose i is frame i only when no frame was lost: the frame stats say which frame it is
+            at = int(data.frame_index[i]) if data.frame_index is not None and data.frame_index[i] >= 0 else i
+            nearest = min(frames, key=lambda f: abs(f - at))
             files = data.previews[nearest]
             path = files.get(kind.value) or files.get("rgb") or next(iter(files.values()))
             image.image = _read_image(path)

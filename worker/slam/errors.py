@@ -53,3 +53,10 @@ class EvaluationError(SlamError):
     """Trajectories cannot be compared (e.g. too few associated poses)."""
 
     code = "evaluation_failed"
+
+
+class TrackingFailed(SlamError):
+    """No frame of a run was tracked: there is no trajectory to write or score. The message says why, as far
+    as the run can tell (no image features, no valid depth, ...)."""
+
+    code = "tracking_failed"

@@ -261,6 +261,16 @@ def test_reap_stale_uses_the_heartbeat(session: Session, seq: Sequence) -> None:
     assert jobs.reap_stale(session, older_than_s=1.0).failed == []
 
 
+def test_any_stale_reads_what_reap_stale_would_take(session: Session, seq: Sequence) -> None:
+    job = jobs.create(session, sequence_id=seq.id, preset="full")
+    assert not jobs.any_stale(session, older_than_s=-1.0)  # queued: never stale
+    assert jobs.claim(session, job.id, "w1")
+    assert not jobs.any_stale(session, older_than_s=60.0)  # a fresh heartbeat
+    assert jobs.any_stale(session, older_than_s=-1.0)
+    assert jobs.reap_stale(session, older_than_s=-1.0).failed == [job.id]
+    assert not jobs.any_stale(session, older_than_s=-1.0)
+
+
 def test_reap_requeues_up_to_the_limit_then_fails(session: Session, seq: Sequence) -> None:
     dead, cancelling = (jobs.create(session, sequence_id=seq.id, preset="full") for _ in range(2))
     assert jobs.claim(session, dead.id, "w1") and jobs.claim(session, cancelling.id, "w1")

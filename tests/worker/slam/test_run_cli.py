@@ -57,3 +57,20 @@ def test_the_cli_maps_every_error_of_the_root_to_exit_2(tmp_path, monkeypatch, c
                                      '"cy": 240}', "--out", str(tmp_path / "o")])
     assert run_with_error_mapping(app) == EXIT_BAD_INPUT
     assert "fx must be within" in capsys.readouterr().err
+
+
+def test_a_run_that_tracked_nothing_exits_2_saying_why(tmp_path, monkeypatch, capsys):
+    import cv2
+    import numpy as np
+
+    from cli.errors import EXIT_BAD_INPUT, run_with_error_mapping
+
+    seq = write_sequence(tmp_path / "room", trajectory(3))
+    for depth in (seq / "depth").iterdir():
+        cv2.imwrite(str(depth), np.zeros((480, 640), np.uint16))
+    monkeypatch.setattr("sys.argv", ["vtdslam", "run", str(seq), "--out", str(tmp_path / "o"), "--preset",
+                                     "orb-only", "--quiet"])
+    assert run_with_error_mapping(app) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err
+    assert "no frame was tracked: 3 frames" in err and "valid depth" in err
+    assert not (tmp_path / "o" / "trajectory.txt").exists()

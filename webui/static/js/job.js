@@ -89,6 +89,10 @@
     t.replaceChildren(...(rows.length ? [head, body] : []));
     t.hidden = !rows.length;
     if (m.evaluation_error) t.after(el("p", { class: "muted" }, "No ATE/RPE: " + m.evaluation_error));
+    // frames that were not tracked: trajectory.txt and the ATE hold only the tracked ones
+    $("metrics-warnings")?.remove();
+    const warnings = Array.isArray(m.warnings) ? m.warnings.filter((w) => typeof w === "string") : [];
+    if (warnings.length) $("metrics-counts").parentNode.before(el("p", { id: "metrics-warnings", class: "note warn" }, warnings.join(" ")));
   }
 
   // ---------- scores against truth (sequences made with truth: vtdslam synth / augment) ----------

@@ -33,6 +33,8 @@ class FrameLog:
         """CPU seconds (all threads) per frame's tracking: comparable when the machine is shared."""
         self.matches = FrameMatchLog() if refit else None
         self.relocalisations = self.new_maps = self.merges = 0
+        self.most_features = self.most_with_depth = 0
+        """The most features, and features with a valid depth, any frame had (why a run tracked nothing)."""
 
     def __len__(self) -> int:
         return len(self.stamps)
@@ -52,6 +54,8 @@ class FrameLog:
         self.relocalisations += int(res.relocalised)
         self.new_maps += int(res.new_map)
         self.merges += int(res.merged)
+        self.most_features = max(self.most_features, len(res.feats))
+        self.most_with_depth = max(self.most_with_depth, int(np.count_nonzero(res.feats.depth > 0)))
         self.rel.append(_relative(slam_map, res))
         if self.matches is not None:
             self.matches.add(res.point_ids, res.feats.uv, res.feats.depth, res.feats.octave,

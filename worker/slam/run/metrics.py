@@ -13,7 +13,7 @@ from worker.slam.run.timer import StageTimer
 
 def run_metrics(log: FrameLog, parts: SlamParts, timer: StageTimer, *, loop_s: float, frames_refit: int,
                 overlapped: set[str], dense_points: int, camera: Camera, preset: str, start: int) -> dict:
-    """The 26 run-level entries of metrics.json; the stages' summaries and the evaluation follow them.
+    """The 28 run-level entries of metrics.json; the stages' summaries and the evaluation follow them.
 
     `loop_s`: wall time of the frame loop (s); `frames_refit`: frames re-solved against the final map;
     `overlapped`: stages whose work ran ahead on another thread; `dense_points`: points in map.ply."""
@@ -37,4 +37,19 @@ def run_metrics(log: FrameLog, parts: SlamParts, timer: StageTimer, *, loop_s: f
         "stage_info": {k: round(float(np.mean(v)), 4) for k, v in log.stage_info.items()},
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "camera": camera.to_dict(), "preset": preset, "start": start,
+        "tracked_fraction": round(float(tracked.mean()), 4) if total else None,
+        "warnings": lost_warnings(tracked, start),
     }
+
+
+def lost_warnings(tracked: np.ndarray, start: int) -> list[str]:
+    """A warning when frames were not tracked: how many, where the longest lost stretch is, and that
+    trajectory.txt (and the evaluation) hold only the tracked frames."""
+    lost = np.flatnonzero(~tracked)
+    if not len(lost):
+        return []
+    runs = np.split(lost, np.flatnonzero(np.diff(lost) > 1) + 1)  # consecutive lost frames
+    longest = max(runs, key=len)
+    return [f"{len(lost)} of {len(tracked)} frames ({100 * len(lost) / len(tracked):.1f} %) were not tracked "
+            f"(longest stretch: frames {start + int(longest[0])}..{start + int(longest[-1])}); trajectory.txt "
+            f"and the ATE/RPE hold only the {len(tracked) - len(lost)} tracked frames"]

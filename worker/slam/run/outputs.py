@@ -17,10 +17,13 @@ from worker.slam.run.result import RunResult
 
 
 def write_outputs(result: RunResult, config: PipelineConfig, out: Path) -> None:
-    """trajectory.txt, keyframes.txt (TUM), map.ply, metrics.json, config.json, the aligned ground truth when
-    there is one, the frame statistics and the preview images (JPEG)."""
+    """trajectory.txt (the tracked frames' poses), keyframes.txt (TUM), map.ply, metrics.json, config.json, the
+    aligned ground truth when there is one, the frame statistics and the preview images (JPEG)."""
     out.mkdir(parents=True, exist_ok=True)
-    write_tum_trajectory(out / artifacts.TRAJECTORY, result.trajectory, header="VTD-SLAM trajectory T_WC (every frame)")
+    lost = int((~result.tracked).sum())
+    write_tum_trajectory(out / artifacts.TRAJECTORY, result.trajectory,
+                         header="VTD-SLAM trajectory T_WC (every frame)" if not lost else
+                         f"VTD-SLAM trajectory T_WC (the tracked frames; {lost} of {len(result.tracked)} not tracked)")
     write_tum_trajectory(out / artifacts.KEYFRAMES, result.keyframes, header="VTD-SLAM keyframes T_WC")
     xyz, rgb = result.cloud if result.cloud is not None else (np.zeros((0, 3)), np.zeros((0, 3), np.uint8))
     write_ply(out / artifacts.MAP, xyz, rgb)

@@ -16,6 +16,7 @@ import numpy as np
 
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig
+from worker.slam.errors import TrackingFailed
 from worker.slam.geometry.se3 import orthonormalize
 from worker.slam.io.prepare_ahead import Prepared
 from worker.slam.io.sequence import Frame, Sequence
@@ -128,20 +129,27 @@ class PipelineRun:
     # ---- at the end --------------------------------------------------------------------------------------
 
     def finish(self) -> RunResult:
-        """Complete the deferred work, then global BA, frame refit, the dense map, metrics and evaluation."""
+        """Complete the deferred work, then global BA, frame refit, the dense map, metrics and evaluation.
+        Raises `TrackingFailed` (saying why) when no frame was tracked; the result's trajectory holds only the
+        tracked frames (TUM tools expect estimated poses only), the per-frame records all of them."""
         self.deferred.finish()  # the keyframes' restored images and the previews, before the dense map
         loop_s = time.perf_counter() - self._t_loop
         self.close()
+        tracked = np.array(self.log.tracked, dtype=bool)
+        if not tracked.any():
+            raise TrackingFailed(self._why_nothing_tracked(),
+                                 detail={"frames": len(self.log), "most_features": self.log.most_features,
+                                         "most_features_with_depth": self.log.most_with_depth})
         smap = self.parts.map
         if self.config.mapping.final_global_ba:
             self.timer.mark()
             self.parts.mapper.global_bundle_adjust(self.config.mapping.global_ba_iterations)
             self.timer.lap("global_ba")
         self._progress("dense")
-        traj, n_refit = self._trajectory()
+        every, n_refit = self._trajectory()
+        traj = Trajectory(every.timestamps[tracked], every.poses[tracked])  # no pose for a frame never tracked
         kf_traj = Trajectory(np.array([kf.timestamp for kf in smap.keyframes]), smap.poses())
-        tracked = np.array(self.log.tracked, dtype=bool)
-        cloud = self._dense_map(traj, tracked)
+        cloud = self._dense_map(every, tracked)
         metrics = run_metrics(self.log, self.parts, self.timer, loop_s=loop_s, frames_refit=n_refit,
                               overlapped=self.stages.overlapped, dense_points=int(len(cloud[0])) if cloud else 0,
                               camera=self.camera, preset=self.config.name, start=self.start)
@@ -160,8 +168,21 @@ class PipelineRun:
         if self.progress is not None:
             self.progress(self.total, self.total, stage)
 
+    def _why_nothing_tracked(self) -> str:
+        """"no frame was tracked: ..." with the likeliest reason the log shows."""
+        log, cam, fc = self.log, self.camera, self.config.features
+        head = f"no frame was tracked: {len(log)} frames of {cam.width}x{cam.height}"
+        if log.most_features == 0:
+            return (f"{head}, and no frame had any ORB feature (images too small or without texture; "
+                    f"{fc.n_levels} pyramid levels need images of at least about 64x48 pixels)")
+        if log.most_with_depth == 0:
+            return (f"{head}, and no feature had a valid depth (depth images all zero, or every depth outside "
+                    f"{fc.min_depth_m:g}..{fc.max_depth_m:g} m: a wrong depth scale?)")
+        return (f"{head}: at most {log.most_with_depth} features with a valid depth in a frame, too few to start "
+                f"a map (tracking.init_min_points {self.config.tracking.init_min_points})")
+
     def _trajectory(self) -> tuple[Trajectory, int]:
-        """Every frame's final T_WC (through its reference keyframe, re-solved against the final map when
+        """Every frame's final T_WC, lost ones too (through its reference keyframe, re-solved against the final map when
         `mapping.refit_frames`), and how many frames were re-solved. Starts the timer's lap of "dense"."""
         smap = self.parts.map
         self.timer.mark()

@@ -12,7 +12,8 @@ from worker.slam.map.map import Map
 @dataclass
 class RunResult:
     trajectory: Trajectory
-    """Every processed frame's T_WC."""
+    """The tracked frames' T_WC (trajectory.txt): a frame never tracked has no pose; match by timestamp, or
+    index it with `tracked`'s true entries, never by frame index."""
     keyframes: Trajectory
     metrics: dict
     """What metrics.json holds (`run.metrics.run_metrics`, then the stages' summaries and the evaluation)."""

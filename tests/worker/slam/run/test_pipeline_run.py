@@ -18,7 +18,8 @@ from worker.slam.sensor import SensorModel
 RUN_KEYS = ["frames", "tracked", "lost", "relocalisations", "new_maps", "map_merges", "established_switches",
             "rescued_frames", "last_pose_retries", "frames_refit", "keyframes", "map_points", "fused_observations",
             "loops", "loops_applied", "fps", "tracking_fps", "tracking_cpu_ms", "timings_ms", "overlapped_stages",
-            "dense_points", "stage_info", "peak_rss_mb", "camera", "preset", "start"]
+            "dense_points", "stage_info", "peak_rss_mb", "camera", "preset", "start", "tracked_fraction",
+            "warnings"]
 
 
 @pytest.fixture(scope="module")
