@@ -38,3 +38,9 @@ def run_metrics(log: FrameLog, parts: SlamParts, timer: StageTimer, *, loop_s: f
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "camera": camera.to_dict(), "preset": preset, "start": start,
     }
+
+
+def with_truth(stages: dict[str, dict], truth: dict[str, dict]) -> dict[str, dict]:
+    """The stages' summaries (by stage name) each with its evaluation against truth (`truth_observer`) last, under
+    "truth", where it has one."""
+    return {name: {**summary, "truth": truth[name]} if name in truth else summary for name, summary in stages.items()}
