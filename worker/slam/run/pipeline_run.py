@@ -121,12 +121,14 @@ class PipelineRun:
                        last=None if last is None else TrackedPose(last.index, last.T_WC, last.covariance))
 
     def _record(self, frame: Frame, inputs: FrameInputs) -> None:
-        """Keep what the stages made of `frame` in the history; show it to the observer."""
+        """Keep what the stages made of `frame` in the history; show it to the observer (whose truth reads count
+        in no lap of the timer: not in the tracking that follows)."""
         if self.history.length:
             self.history.append(PastFrame(frame.index, frame.timestamp, frame.rgb, frame.depth, inputs.extracted,
                                           inputs.features, inputs.potentially_dynamic, inputs.dynamic_mask))
         if self.observer is not None:
             self.observer.frame(frame.index, inputs)
+            self.timer.mark()
 
     def _track(self, frame: Frame, inputs: FrameInputs) -> TrackResult:
         c0 = time.process_time()
