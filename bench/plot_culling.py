@@ -30,6 +30,7 @@ class Recorder:
 
     def __init__(self, stage: CullingStage, truth) -> None:
         self.stage, self.truth = stage, truth
+        self.history_frames = stage.history_frames  # the past frames culling reads from the run's history
         self.rows: list[tuple[int, float, np.ndarray, np.ndarray]] = []
 
     def process(self, frame, inputs, ctx):

@@ -32,7 +32,7 @@ STAGE_CONTRACTS: dict[str, StageContract] = {
         # Extracts the frame's features itself; with segmentation's mask (and `culling.use_segmentation`,
         # default on) it judges the marked objects, without one it judges geometric clusters alone.
         StageContract("culling", uses=("potentially_dynamic",),
-                      provides=("features", "exclude_mask", "dynamic_mask", "held_back")),
+                      provides=("features", "exclude_mask", "dynamic_mask", "held_back", "extracted", "culled")),
         # Fills the pixels judged moving from reference frames; matches them by the kept features' descriptors.
         StageContract("restoration", needs=("dynamic_mask",), uses=("features",),
                       provides=("restored_rgb", "restored_depth", "extra_features", "previews")),

@@ -3,7 +3,7 @@ stages by name; `formats.catalog.STAGE_CONTRACTS` says which `FrameInputs` field
 
 A stage (segmentation, dynamic culling, restoration) runs before tracking. It gets the frame, the `FrameInputs`
 built so far and a `StageContext` -- a narrow, read-only view of the run (camera, config, predicted and last
-pose, the sequence and its truth), never the tracker itself -- and returns updated
+pose, the history of past frames, the sequence and its truth), never the tracker itself -- and returns updated
 `FrameInputs`; the pipeline hands their `track_inputs()` to the tracker.
 
 Two ways for a stage to keep work off the tracking path: `prepare(frame)` (work on the frame alone, run ahead
@@ -21,6 +21,7 @@ import numpy as np
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig
 from worker.slam.features.types import Features
+from worker.slam.history import HistoryView
 from worker.slam.io.sequence import Frame, Sequence
 from worker.slam.tracking.inputs import TrackInputs
 from worker.slam.truth import Truth
@@ -51,16 +52,22 @@ class FrameInputs:
     """bool (H,W): pixels judged moving (culling)."""
     held_back: Features | None = None
     """Keypoints culling removed from `features`: the tracker falls back on them only when it would be lost."""
+    extracted: Features | None = None
+    """Every keypoint extracted from the frame, before culling (the history keeps them for later comparisons)."""
+    culled: np.ndarray | None = None
+    """bool (N,) over `extracted`: the keypoints culling removed after comparing the frame with a past one; None
+    when it compared nothing (the first frame). Read by the evaluation against truth (`run.truth_observer`)."""
     previews: dict[str, np.ndarray] | None = None
     """RGB uint8 images worth saving for this frame (e.g. {'rgb', 'mask', 'restored'})."""
     prepared: dict[str, object] = field(default_factory=dict)
     """Results of stages' `prepare(frame)` computed ahead on another thread, by stage name; a stage whose entry
     is missing (or None) computes the same in `process`."""
-    deferred: Callable[[FrameInputs, str], None] | None = None
+    deferred: Callable[[FrameInputs, str, HistoryView], None] | None = None
     """Work a stage left for later because tracking does not read its output (restoration, when no keypoint's
-    depth comes from restored pixels): `deferred(inputs, why)` (why: 'keyframe' or 'preview') fills the frame's
-    final inputs' `restored_rgb`, `restored_depth`, `previews` and `info` as `process` would have. The pipeline
-    calls it after tracking only when the frame became a keyframe or a preview is due, and drops it otherwise."""
+    depth comes from restored pixels): `deferred(inputs, why, history)` (why: 'keyframe' or 'preview'; history:
+    the run's history when the work was released, `deferred_delay` frames later) fills the frame's final inputs'
+    `restored_rgb`, `restored_depth`, `previews` and `info` as `process` would have. The pipeline calls it after
+    tracking only when the frame became a keyframe or a preview is due, and drops it otherwise."""
     deferred_delay: int = 0
     """Frames that must go through the stages after this one before `deferred` may run (e.g. restoration that
     takes the next frames, as tracked, for references)."""
@@ -98,13 +105,17 @@ class StageContext:
     """(4,4) float64: the motion model's pose prediction for this frame; None before the first tracked frame."""
     last: TrackedPose | None = None
     """The last successfully tracked frame; None before the first."""
+    history: HistoryView = HistoryView()
+    """The frames before this one, as the stages left them and with their tracked poses (`worker.slam.history`);
+    as many as the stages declare they read (`history_frames`)."""
 
 
 class FrameStage(Protocol):
     """A per-frame stage. It may also define `summary() -> dict`: run-level figures that the pipeline stores in
-    metrics.json under the stage's name; and `prepare(frame) -> object`: work that depends on the frame alone
+    metrics.json under the stage's name; `prepare(frame) -> object`: work that depends on the frame alone
     (pure, deterministic, never touching what `process` changes), which the pipeline may run ahead on another
-    thread and hands to `process` as `inputs.prepared[name]`."""
+    thread and hands to `process` as `inputs.prepared[name]`; and `history_frames: int`: how many past frames it
+    reads from `ctx.history` (none when absent)."""
 
     name: str
 

@@ -2,13 +2,13 @@
 in inpainting/stage.py).
 
 The culling stage extracts the frame's ORB features once (the tracker reuses them), judges the objects against
-the previous frame and hands the tracker the features outside moving objects plus an exclude mask.
+a past frame (`lag_frames` back, from the run's history: its extracted features, depth and tracked pose) and hands
+the tracker the features outside moving objects plus an exclude mask.
 """
 from __future__ import annotations
 
 import dataclasses
 import time
-from collections import deque
 from dataclasses import dataclass, field
 
 import cv2
@@ -23,7 +23,6 @@ from worker.slam.features.types import Features
 from worker.slam.geometry.se3 import inv
 from worker.slam.io.sequence import Frame
 from worker.slam.stages import FrameInputs, StageContext
-from worker.slam.truth import TruthScores
 
 
 @dataclass
@@ -48,16 +47,6 @@ class CullingStageConfig:
     Measured: docs/results/settings.md#culling-refill_below"""
 
 
-@dataclass
-class _PastFrame:
-    """A frame kept for comparison; `T_WC` is filled in once the tracker has estimated it (None if lost)."""
-
-    index: int
-    feats: Features
-    depth: np.ndarray
-    T_WC: np.ndarray | None = None
-
-
 class CullingStage:
     contract = STAGE_CONTRACTS["culling"]
     name = contract.name
@@ -70,8 +59,8 @@ class CullingStage:
         self.camera = camera
         # its own extractor (the tracker's settings): `prepare` may run on another thread than the tracker's
         self.extractor = OrbExtractor(config.features)
-        self.history: deque[_PastFrame] = deque(maxlen=max(1, self.cfg.lag_frames))
-        self.scores: TruthScores | None = None
+        self.history_frames = max(1, self.cfg.lag_frames)
+        """Past frames read from `ctx.history`: the one compared with is the oldest of them."""
         self.removed_total = self.kept_total = self.readmitted_total = self.refilled = 0
         self.compared = self.guided = self.not_judged = self.without_objects = self.marks_trusted = 0
         # semantic segments judged, and how many of them against their own (object-level) Δd
@@ -92,20 +81,18 @@ class CullingStage:
         return self.extractor.extract(cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY), frame.depth, exclude)
 
     def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
-        if self.scores is None and ctx.truth is not None:
-            self.scores = TruthScores(ctx.truth)
         self.last = None
         feats = inputs.prepared.get(self.name)
         if not isinstance(feats, Features):
             feats = self.prepare(frame)
         removed = np.zeros(len(feats), bool)
         last = ctx.last
-        if self.history and last is not None and last.index == self.history[-1].index:
-            self.history[-1].T_WC = last.T_WC
-        compared = bool(self.history) and len(feats) > 0
+        history = ctx.history.recent(self.history_frames)
+        compared = bool(history) and len(feats) > 0
         if compared:
-            past = self.history[0]  # the oldest kept: `lag_frames` back
-            prev_feats, prev_depth = past.feats, past.depth
+            past = history[0]  # `lag_frames` back (the first frame at the start)
+            assert past.extracted is not None, "culling's own output: it runs on every frame"
+            prev_feats, prev_depth = past.extracted, past.depth
             cov = last.covariance if last is not None else None
             T_pred = ctx.T_WC_pred
             T_cur_prev = inv(T_pred) @ past.T_WC if T_pred is not None and past.T_WC is not None else None
@@ -136,10 +123,7 @@ class CullingStage:
                                object_thresholds=sum(s.object_level for s in res.segments), judged=res.judged)
             if res.entropy is not None:
                 inputs.info["motion_entropy"] = res.entropy
-            if self.scores is not None and ctx.truth is not None and frame.index < len(ctx.truth):
-                self.scores.add_mask(frame.index, res.dynamic_mask)
-                self.scores.add_features(frame.index, feats.uv[removed], feats.uv[~removed],
-                                         marked=inputs.potentially_dynamic if self.use_segmentation else None)
+            inputs.culled = removed
         elif self.use_segmentation and inputs.potentially_dynamic is not None and len(feats):
             # Nothing to compare with yet (first frame): keep potentially dynamic objects out of the new map.
             inputs.exclude_mask = dilate_disc(inputs.potentially_dynamic, self.cfg.culling.dilation_px)
@@ -157,7 +141,7 @@ class CullingStage:
         inputs.info.update(features_removed=int(removed.sum()), features_kept=int((~removed).sum()))
         self.removed_total += int(removed.sum())
         self.kept_total += int((~removed).sum())
-        self.history.append(_PastFrame(frame.index, feats, frame.depth))
+        inputs.extracted = feats
         return inputs
 
     def _readmit(self, removed: np.ndarray, uv: np.ndarray, dynamic: np.ndarray, info: dict) -> np.ndarray:
@@ -173,13 +157,11 @@ class CullingStage:
         return removed
 
     def summary(self) -> dict:
-        out: dict = {"features_removed": self.removed_total, "features_kept": self.kept_total,
-               "features_readmitted": self.readmitted_total, "frames_refilled": self.refilled,
-               "frames_compared": self.compared, "guided_matching_frames": self.guided,
-               "frames_not_judged": self.not_judged, "frames_without_objects": self.without_objects,
-               "frames_marks_trusted": self.marks_trusted,
-               "segments_judged": self.segments_judged, "object_level_thresholds": self.object_thresholds,
-               "decision_ms_median": float(np.median(self.decision_ms)) if self.decision_ms else None}
-        if self.scores is not None:
-            out["truth"] = {k: v for k, v in self.scores.summary().items() if k != "restoration_psnr"}
-        return out
+        """Run-level figures (the evaluation against truth adds its "truth" entry: `run.truth_observer`)."""
+        return {"features_removed": self.removed_total, "features_kept": self.kept_total,
+                "features_readmitted": self.readmitted_total, "frames_refilled": self.refilled,
+                "frames_compared": self.compared, "guided_matching_frames": self.guided,
+                "frames_not_judged": self.not_judged, "frames_without_objects": self.without_objects,
+                "frames_marks_trusted": self.marks_trusted,
+                "segments_judged": self.segments_judged, "object_level_thresholds": self.object_thresholds,
+                "decision_ms_median": float(np.median(self.decision_ms)) if self.decision_ms else None}

@@ -43,18 +43,6 @@ class LookaheadConfig:
     """Moving pixels are grown by this much: a person's edge pixels have depth between body and background."""
 
 
-@dataclass(frozen=True)
-class FutureView:
-    """A future frame with its estimated pose `T_WC` (4,4), `dynamic` bool (H,W) and PnP inlier count."""
-
-    index: int
-    rgb: np.ndarray
-    depth: np.ndarray
-    T_WC: np.ndarray
-    dynamic: np.ndarray
-    inliers: int
-
-
 def relative_pose_pnp(target: Features, target_static: np.ndarray, future: Features, K: np.ndarray,
                       config: LookaheadConfig) -> tuple[np.ndarray, int] | None:
     """T_ft (4,4): target camera -> future camera, from the target's keypoints with depth whose pixel is

@@ -91,7 +91,8 @@ class RestorationConfig:
 @dataclass(frozen=True)
 class ReferenceView:
     """A reference frame: `rgb` RGB uint8 (H, W, 3), `depth` float32 m (H, W), pose `T_WC`, and `dynamic`
-    bool (H, W) marking its own moving pixels, which must not be copied."""
+    bool (H, W) marking its own moving pixels, which must not be copied. The algorithm's input, not a history:
+    the stage builds it from the run's history records (`worker.slam.history.PastFrame`) or a frame read ahead."""
 
     rgb: np.ndarray
     depth: np.ndarray

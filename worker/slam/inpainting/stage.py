@@ -18,13 +18,15 @@ frame with neither is not restored in `process`: its restoration is left in `Fra
 pipeline runs only when the frame becomes a keyframe (the dense map) or a preview is due, on a background
 thread while the next frames are tracked. Outputs are the same; the restoration metrics then cover the restored
 frames only (`restored_frames`, `restored_for`). A restoration reads only what `process` captured for it (the
-frame, its hole, the past references as they were) and the stage's state that only restorations touch, under
-one lock, so one in `process` and one deferred never interleave.
+frame, its hole, the past references as they were), the run's history when it was released (the frames after
+its target, as tracked) and the stage's state that only restorations touch, under one lock, so one in `process`
+and one deferred never interleave. Past and future references are records of the run's history
+(`worker.slam.history`); the stage keeps no frames of its own but the ones it read ahead.
 """
 from __future__ import annotations
 
 import threading
-from collections import Counter, deque
+from collections import Counter
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -35,12 +37,12 @@ from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig, valid
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.types import Features
+from worker.slam.history import HistoryView, PastFrame
 from worker.slam.inpainting.lookahead import LookaheadConfig, moving_pixels, relative_pose_pnp
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references
 from worker.slam.inpainting.restore import ReferenceView, Restoration, RestorationConfig, restore_frame
 from worker.slam.io.sequence import Frame
 from worker.slam.stages import FrameInputs, StageContext
-from worker.slam.truth import restoration_psnr
 
 
 @dataclass
@@ -89,25 +91,6 @@ class RestorationStageConfig:
             raise ValueError(f"deferred_future must be 'tracked' or 'lookahead', not {self.deferred_future!r}")
 
 
-@dataclass
-class _Past:
-    index: int
-    rgb: np.ndarray
-    depth: np.ndarray
-    dynamic: np.ndarray
-    desc: np.ndarray | None
-    T_WC: np.ndarray | None = None
-    """Set when the next frame arrives: the tracker's pose for it, None if it was lost."""
-
-
-@dataclass(frozen=True)
-class _Tracked:
-    """A deferred restoration's view of its target and of the frames after it, filled as they are tracked."""
-
-    own: _Past
-    future: list[_Past]
-
-
 class RestorationStage:
     contract = STAGE_CONTRACTS["restoration"]
     name = contract.name
@@ -115,15 +98,16 @@ class RestorationStage:
     def __init__(self, config: PipelineConfig, camera: Camera) -> None:
         self.cfg: RestorationStageConfig = config.section("restoration")
         self.camera = camera
-        self.past: deque[_Past] = deque(maxlen=self.cfg.selection.reach)
+        reach = self.cfg.selection.reach
+        self.tracked_future = self.cfg.references == "both-sided" and self.cfg.deferred_future == "tracked"
+        """Deferred restorations take the frames after the target from the history, as tracked."""
+        self.history_frames = reach + 2 if self.tracked_future else reach
+        """Past frames read from `ctx.history`: `reach` references before the target; a deferred restoration
+        released `reach` + 1 frames after its target also reads the target and the `reach` frames after it."""
         self.ahead: dict[int, tuple[Frame, Features]] = {}
         """Future frames read for both-sided references, with their ORB features, by index."""
-        self.collecting: dict[int, list[_Past]] = {}
-        """The frames after a target whose deferred restoration waits for them ("tracked"), by target index."""
         self.future_refs = 0
         self.far_refs = 0
-        self.psnr: list[float] = []
-        self.depth_err: list[float] = []
         self.restored_frames = 0
         self.restored_for: Counter[str] = Counter()
         """Why frames were restored: 'tracking' (in `process`), 'keyframe' or 'preview' (deferred)."""
@@ -137,39 +121,26 @@ class RestorationStage:
         self._lock = threading.Lock()
         self.extractor = OrbExtractor(config.features)
 
-    def _record_pose(self, ctx: StageContext) -> None:
-        last = ctx.last
-        if last is None:
-            return
-        for p in self.past:
-            if p.index == last.index:
-                p.T_WC = last.T_WC.copy()
-
     def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
-        self._record_pose(ctx)
         hole = inputs.dynamic_mask if inputs.dynamic_mask is not None else np.zeros(frame.depth.shape, bool)
         desc = inputs.features.desc if inputs.features is not None else None
-        own = _Past(frame.index, frame.rgb, frame.depth, hole, desc)
         reach = self.cfg.selection.reach
-        for k in list(self.collecting):
-            if frame.index - k > reach:  # complete: this frame's `_record_pose` gave the last one its pose
-                del self.collecting[k]
-            else:
-                self.collecting[k].append(own)
         # before the first tracked frame there is no pose to warp into
         if hole.mean() >= self.cfg.min_hole_fraction and ctx.T_WC_pred is not None:
-            past = list(self.past)  # the references as they are now: a deferred call must see the same
+            past = ctx.history.recent(reach)  # immutable records: a deferred call sees them as they are now
             inputs.info["hole_fraction"] = float(hole.mean())  # every frame with a hole, restored or not
             if self.cfg.on_demand and not self._tracking_reads(hole, inputs, ctx):
                 self.deferred += 1
-                tracked: _Tracked | None = None
-                if self.cfg.references == "both-sided" and self.cfg.deferred_future == "tracked":
-                    tracked = _Tracked(own, self.collecting.setdefault(frame.index, []))
+                tracked = self.tracked_future
+                if tracked:
                     inputs.deferred_delay = reach + 1  # until the last future frame has its pose
-                inputs.deferred = lambda out, why: self._restore(frame, hole, desc, out, ctx, past, why, tracked)
+
+                def deferred(out: FrameInputs, why: str, later: HistoryView) -> None:
+                    self._restore(frame, hole, desc, out, ctx, past, why, later if tracked else None)
+
+                inputs.deferred = deferred
             else:
                 self._restore(frame, hole, desc, inputs, ctx, past, "tracking")
-        self.past.append(own)
         return inputs
 
     def _tracking_reads(self, hole: np.ndarray, inputs: FrameInputs, ctx: StageContext) -> bool:
@@ -193,27 +164,29 @@ class RestorationStage:
         return bool(np.any(cum[yb, xb] - cum[ya, xb] - cum[yb, xa] + cum[ya, xa] > 0))
 
     def _restore(self, frame: Frame, hole: np.ndarray, desc: np.ndarray | None, inputs: FrameInputs,
-                 ctx: StageContext, past: list[_Past], why: str, tracked: _Tracked | None = None) -> None:
+                 ctx: StageContext, past: tuple[PastFrame, ...], why: str, later: HistoryView | None = None) -> None:
+        """`later`: the run's history when a deferred restoration ("tracked" future) was released."""
         with self._lock:
-            self._restore_locked(frame, hole, desc, inputs, ctx, past, why, tracked)
+            self._restore_locked(frame, hole, desc, inputs, ctx, past, why, later)
 
     def _restore_locked(self, frame: Frame, hole: np.ndarray, desc: np.ndarray | None, inputs: FrameInputs,
-                        ctx: StageContext, past: list[_Past], why: str, tracked: _Tracked | None) -> None:
+                        ctx: StageContext, past: tuple[PastFrame, ...], why: str, later: HistoryView | None) -> None:
         T_target = ctx.T_WC_pred
         assert T_target is not None
         both = self.cfg.references == "both-sided"
         views: dict[int, ReferenceView] = {}
         cands: list[Candidate] = []
-        if tracked is not None:
+        if later is not None:
             # the target where the tracker put it (if it was tracked), and the frames after it as tracked
-            T_target = tracked.own.T_WC if tracked.own.T_WC is not None else T_target
-            past = past + tracked.future
+            own = later.get(frame.index)
+            T_target = own.T_WC if own is not None and own.T_WC is not None else T_target
+            past = (*past, *later.between(frame.index + 1, frame.index + self.cfg.selection.reach))
         for p in past:
             if p.T_WC is not None:
-                views[p.index] = ReferenceView(p.rgb, p.depth, p.T_WC, p.dynamic)
-                cands.append(Candidate(p.index, p.T_WC, p.desc))
+                views[p.index] = ReferenceView(p.rgb, p.depth, p.T_WC, p.moving())
+                cands.append(Candidate(p.index, p.T_WC, p.features.desc if p.features is not None else None))
         future: dict[int, tuple[Frame, np.ndarray]] = {}
-        if both and tracked is None and inputs.features is not None:
+        if both and later is None and inputs.features is not None:
             future = self._future_poses(frame, hole, inputs.features, T_target, ctx)
             cands += [Candidate(j, T_WC, self.ahead[j][1].desc) for j, (_, T_WC) in future.items()]
         sel = select_references(Candidate(frame.index, T_target, desc), cands, self.cfg.selection, both)
@@ -226,7 +199,7 @@ class RestorationStage:
                 dyn = moving_pixels(f.depth, T_ft, frame.depth, hole, self.camera.K, self.cfg.lookahead)
                 views[j] = ReferenceView(f.rgb, f.depth, T_WC, dyn)
                 self.future_refs += 1
-        if tracked is not None:
+        if later is not None:
             self.future_refs += sum(i > frame.index for i in sel.indices)
         margin = self.cfg.reference_margin_px
         refs = [replace(views[i], dynamic=_widen(views[i].dynamic, margin)) for i in sel.indices]
@@ -245,13 +218,6 @@ class RestorationStage:
             self.extra += len(extra)
             inputs.info["restored_features"] = len(extra)
         inputs.previews = {"rgb": frame.rgb, "mask": _overlay(frame.rgb, hole), "restored": out.rgb}
-        truth = ctx.truth
-        if truth is not None and frame.index < len(truth):
-            self.psnr.append(min(restoration_psnr(out.rgb, truth.background_rgb(frame.index), hole), 100.0))
-            bg = truth.background_depth(frame.index)
-            ok = hole & (out.depth > 0) & (bg > 0)
-            if ok.any():
-                self.depth_err.append(float(np.median(np.abs(out.depth[ok] - bg[ok]))))
 
     def _future_poses(self, frame: Frame, hole: np.ndarray, own: Features, T_pred: np.ndarray,
                       ctx: StageContext) -> dict[int, tuple[Frame, np.ndarray]]:
@@ -292,20 +258,15 @@ class RestorationStage:
         return feats.select(keep)
 
     def summary(self) -> dict:
-        out: dict = {"references": self.cfg.references, "restored_frames": self.restored_frames,
-                     "deferred_future": self.cfg.deferred_future if self.cfg.references == "both-sided" else None,
-                     "restored_for": dict(sorted(self.restored_for.items())),
-                     "not_restored": self.deferred - self.restored_for["keyframe"] - self.restored_for["preview"],
-                     "future_references": self.future_refs, "far_references": self.far_refs,
-                     "restored_features": self.extra,
-                     "references_used": self.references_used, "reference_poses_refined": self.poses_refined,
-                     "relaxed_reference_choices": self.relaxed}
-        if self.psnr:
-            # over the restored frames only: on demand, those are the keyframes and previews (`restored_for`)
-            out["truth"] = {"frames_scored": len(self.psnr), "restoration_psnr": float(np.mean(self.psnr)),
-                            "restoration_depth_median_m": float(np.median(self.depth_err)) if self.depth_err
-                            else None}
-        return out
+        """Run-level figures (the evaluation against truth adds its "truth" entry: `run.truth_observer`)."""
+        return {"references": self.cfg.references, "restored_frames": self.restored_frames,
+                "deferred_future": self.cfg.deferred_future if self.cfg.references == "both-sided" else None,
+                "restored_for": dict(sorted(self.restored_for.items())),
+                "not_restored": self.deferred - self.restored_for["keyframe"] - self.restored_for["preview"],
+                "future_references": self.future_refs, "far_references": self.far_refs,
+                "restored_features": self.extra,
+                "references_used": self.references_used, "reference_poses_refined": self.poses_refined,
+                "relaxed_reference_choices": self.relaxed}
 
 
 def _overlay(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -53,3 +53,9 @@ def lost_warnings(tracked: np.ndarray, start: int) -> list[str]:
     return [f"{len(lost)} of {len(tracked)} frames ({100 * len(lost) / len(tracked):.1f} %) were not tracked "
             f"(longest stretch: frames {start + int(longest[0])}..{start + int(longest[-1])}); trajectory.txt "
             f"and the ATE/RPE hold only the {len(tracked) - len(lost)} tracked frames"]
+
+
+def with_truth(stages: dict[str, dict], truth: dict[str, dict]) -> dict[str, dict]:
+    """The stages' summaries (by stage name) each with its evaluation against truth (`truth_observer`) last, under
+    "truth", where it has one."""
+    return {name: {**summary, "truth": truth[name]} if name in truth else summary for name, summary in stages.items()}

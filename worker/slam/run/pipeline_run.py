@@ -4,7 +4,10 @@ frame refit, the dense map, metrics and evaluation.
 The per-frame state kept is the pose relative to its reference keyframe, so BA and loop corrections move every
 frame's pose at the end, and (`mapping.refit_frames`) the map points it matched, so each frame's pose is then
 re-solved against the final map (`mapping/frame_refit.py`). Before each frame the stages get a fresh
-`StageContext` (the motion model's predicted pose, the last tracked pose and its covariance), never the tracker.
+`StageContext` (the motion model's predicted pose, the last tracked pose and its covariance, the run's history of
+past frames), never the tracker. The run owns that history (`worker.slam.history`): it records each frame after
+its stages ran and gives it its pose once tracked. With the sequence's truth, an observer scores the stages'
+outputs against it (`truth_observer`); its scores are the "truth" entries of the stages' metrics.
 """
 from __future__ import annotations
 
@@ -18,6 +21,7 @@ from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig
 from worker.slam.errors import TrackingFailed
 from worker.slam.geometry.se3 import orthonormalize
+from worker.slam.history import FrameHistory, PastFrame
 from worker.slam.io.prepare_ahead import Prepared
 from worker.slam.io.sequence import Frame, Sequence
 from worker.slam.io.trajectory import Trajectory
@@ -28,12 +32,13 @@ from worker.slam.run.callbacks import ProgressFn
 from worker.slam.run.deferred import DeferredWork
 from worker.slam.run.evaluation import RunEvaluation, evaluate_run
 from worker.slam.run.frame_log import FrameLog
-from worker.slam.run.metrics import run_metrics
+from worker.slam.run.metrics import run_metrics, with_truth
 from worker.slam.run.parts import SlamParts, build_slam
 from worker.slam.run.previews import PreviewPicker
 from worker.slam.run.result import RunResult
 from worker.slam.run.stage_runner import StageRunner
 from worker.slam.run.timer import StageTimer
+from worker.slam.run.truth_observer import TruthObserver
 from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPose
 from worker.slam.tracking.result import TrackResult
 from worker.slam.truth import Truth
@@ -60,7 +65,10 @@ class PipelineRun:
         self.timer = StageTimer()
         self.stages = StageRunner(stages, self.timer)
         self.previews = PreviewPicker(start, total)
-        self.deferred = DeferredWork(restore_behind, self.previews, config.dense.stride)
+        self.history = FrameHistory(self.stages.history_frames())
+        self.observer = TruthObserver(truth) if truth is not None else None
+        self.deferred = DeferredWork(restore_behind, self.previews, config.dense.stride, self.history,
+                                     self.observer.restored if self.observer is not None else None)
         self.log = FrameLog(config.mapping.refit_frames)
         dense = config.dense
         self.carve_frames = FrameViews(dense.carve_every if dense.enabled and dense.carve else 0, dense.stride,
@@ -86,6 +94,7 @@ class PipelineRun:
         item = frame if isinstance(frame, Prepared) else Prepared(frame)
         self.timer.mark()
         inputs, deferred_by = self.stages.process(item, self._frame_context())
+        self._record(item.frame, inputs)
         res = self._track(item.frame, inputs)
         self.log.add_stage_info(inputs.info)
         if inputs.previews:
@@ -103,11 +112,24 @@ class PipelineRun:
         return res
 
     def _frame_context(self) -> StageContext:
-        """The run's context with the tracker's prediction for the coming frame and its last tracked pose."""
+        """The run's context with the tracker's prediction for the coming frame, its last tracked pose and the
+        history, whose record of that frame gets its pose now (a lost frame's stays None)."""
         tracker = self.parts.tracker
         last = tracker.last_result
-        return replace(self._ctx, T_WC_pred=tracker.predicted_pose(),
+        if last is not None:
+            self.history.set_pose(last.index, last.T_WC)
+        return replace(self._ctx, T_WC_pred=tracker.predicted_pose(), history=self.history.view(),
                        last=None if last is None else TrackedPose(last.index, last.T_WC, last.covariance))
+
+    def _record(self, frame: Frame, inputs: FrameInputs) -> None:
+        """Keep what the stages made of `frame` in the history; show it to the observer (whose truth reads count
+        in no lap of the timer: not in the tracking that follows)."""
+        if self.history.length:
+            self.history.append(PastFrame(frame.index, frame.timestamp, frame.rgb, frame.depth, inputs.extracted,
+                                          inputs.features, inputs.potentially_dynamic, inputs.dynamic_mask))
+        if self.observer is not None:
+            self.observer.frame(frame.index, inputs)
+            self.timer.mark()
 
     def _track(self, frame: Frame, inputs: FrameInputs) -> TrackResult:
         c0 = time.process_time()
@@ -153,7 +175,8 @@ class PipelineRun:
         metrics = run_metrics(self.log, self.parts, self.timer, loop_s=loop_s, frames_refit=n_refit,
                               overlapped=self.stages.overlapped, dense_points=int(len(cloud[0])) if cloud else 0,
                               camera=self.camera, preset=self.config.name, start=self.start)
-        metrics.update(self.stages.summaries())
+        truth = self.observer.summaries(self.stages.names()) if self.observer is not None else {}
+        metrics.update(with_truth(self.stages.summaries(), truth))
         ev = RunEvaluation({})
         groundtruth = self.sequence.groundtruth if self.sequence is not None else None
         if groundtruth is not None:

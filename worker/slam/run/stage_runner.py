@@ -45,6 +45,13 @@ class StageRunner:
                 deferred_by = st.name
         return inputs, deferred_by
 
+    def names(self) -> list[str]:
+        return [st.name for st in self.stages]
+
+    def history_frames(self) -> int:
+        """The most past frames any stage reads from `StageContext.history` (its optional `history_frames`)."""
+        return max((int(getattr(st, "history_frames", 0)) for st in self.stages), default=0)
+
     def summaries(self) -> dict[str, dict]:
         """Run-level figures of the stages that define `summary()`, by stage name, in stage order."""
         out = {}

@@ -9,6 +9,7 @@ from tests.worker.slam.inpainting.scene import H, K, W, pose, render, texture
 from worker.slam.camera import Camera
 from worker.slam.errors import ConfigError
 from worker.slam.features.orb import OrbExtractor
+from worker.slam.history import FrameHistory, PastFrame
 from worker.slam.inpainting.lookahead import LookaheadConfig, moving_pixels, relative_pose_pnp
 from worker.slam.inpainting.stage import RestorationStage
 from worker.slam.io.sequence import Frame
@@ -64,15 +65,20 @@ def run_stage(references: str, seq: WallSequence | None = None, mask=person,
     extractor = OrbExtractor(config.features)
     seq = seq if seq is not None else WallSequence()
     stage = RestorationStage(config, camera)
+    history = FrameHistory(stage.history_frames)  # what the run keeps for the stages, as `PipelineRun` does
     last: TrackedPose | None = None
     inputs = FrameInputs()
     for i in range(TARGET + 1):
         f = seq[i]
         gray = cv2.cvtColor(f.rgb, cv2.COLOR_RGB2GRAY)
         inputs = FrameInputs(features=extractor.extract(gray, f.depth, mask(i)), dynamic_mask=mask(i))
+        if last is not None:
+            history.set_pose(last.index, last.T_WC)
         ctx = StageContext(camera, config, seq, None,  # type: ignore[arg-type]  # duck-typed
-                           T_WC_pred=camera_pose(i), last=last)
+                           T_WC_pred=camera_pose(i), last=last, history=history.view())
         inputs = stage.process(f, inputs, ctx)
+        history.append(PastFrame(i, f.timestamp, f.rgb, f.depth, features=inputs.features,
+                                 dynamic=inputs.dynamic_mask))
         last = TrackedPose(i, camera_pose(i), None)
     truth, _ = render(camera_pose(TARGET), seq.tex)
     return inputs, stage, truth
