@@ -4,11 +4,11 @@ segment covers, and the exclusion band around them."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
+from worker.slam.dynamic.culling_config import CullingConfig
 from worker.slam.dynamic.matching import MatchedPoints
 from worker.slam.dynamic.object_motion import estimate_object_motion
 from worker.slam.dynamic.pair import FramePair
@@ -18,9 +18,6 @@ from worker.slam.dynamic.sorted_stats import median_of_sorted, quantile_of_sorte
 from worker.slam.dynamic.threshold import object_threshold
 from worker.slam.features.depth import backproject
 from worker.slam.features.grid import PointGrid
-
-if TYPE_CHECKING:  # culling.py imports this module
-    from worker.slam.dynamic.culling import CullingConfig
 
 
 @dataclass(frozen=True)

@@ -3,17 +3,14 @@ tracker confirms it, brute force on the objects and where it does not."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from worker.slam.dynamic.culling_config import CullingConfig
 from worker.slam.dynamic.epipolar import Matches, match_guided, match_orb, predict_positions
 from worker.slam.dynamic.pair import FramePair, nearest_pixel
 from worker.slam.features.matching import hamming
 from worker.slam.features.search import KeypointIndex
-
-if TYPE_CHECKING:  # culling.py imports this module
-    from worker.slam.dynamic.culling import CullingConfig
 
 
 @dataclass(frozen=True)

@@ -2,15 +2,11 @@
 the depth test's reprojection error and the prediction veto."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import cv2
 import numpy as np
 
+from worker.slam.dynamic.culling_config import CullingConfig
 from worker.slam.geometry.pnp import reprojection_px, sqpnp_ransac
-
-if TYPE_CHECKING:  # a type only: culling.py imports this module (through scoring)
-    from worker.slam.dynamic.culling import CullingConfig
 
 
 def spread(idx: np.ndarray, n: int) -> np.ndarray:

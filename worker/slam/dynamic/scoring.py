@@ -7,11 +7,11 @@ most its reprojection error under that prediction (the prediction veto).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
+from worker.slam.dynamic.culling_config import CullingConfig
 from worker.slam.dynamic.epipolar import (
     epipolar_distance,
     fundamental_from_seed,
@@ -24,9 +24,6 @@ from worker.slam.dynamic.pair import FramePair
 from worker.slam.dynamic.relative_pose import relative_pose, spread, veto_pose
 from worker.slam.features.depth import backproject
 from worker.slam.geometry.pnp import reprojection_px
-
-if TYPE_CHECKING:  # culling.py imports this module
-    from worker.slam.dynamic.culling import CullingConfig
 
 
 @dataclass(frozen=True)
