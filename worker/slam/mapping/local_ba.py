@@ -32,16 +32,71 @@ class BAStats:
     outliers_removed: int
 
 
+@dataclass(frozen=True)
+class _Problem:
+    """What one local BA optimises: the keyframes `cams` (ids; the first `n_var` variable, the rest fixed),
+    the map points `point_set` (P,) int64 ids, and the N observations of them, camera by camera in keypoint order.
+    Per observation: `c` (N,) index into `cams`, `p` (N,) index into `point_set`, `kpi` (N,) keypoint index in
+    its keyframe, `obs` (N,3) measured (u, v, u_r) in pixels, `has` (N,) bool 'has depth', `roww` (N,3) row
+    weights (u_r counts only with depth), `info` (N,) the octave's inverse variance."""
+    cams: list[int]
+    n_var: int
+    point_set: np.ndarray
+    c: np.ndarray
+    p: np.ndarray
+    kpi: np.ndarray
+    obs: np.ndarray
+    has: np.ndarray
+    roww: np.ndarray
+    info: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Estimate:
+    """Camera poses `T_CW` (C,4,4) (world -> camera, in `cams` order), points `X` (P,3) in the world frame, and
+    per observation: the point in its camera's frame `Pc` (N,3), the weighted residual `e` (N,3) in pixels,
+    `chi2` (N,) (1e6 behind the camera), `front` (N,) bool in front of the camera; `cost` the robust total."""
+    T_CW: np.ndarray
+    X: np.ndarray
+    Pc: np.ndarray
+    e: np.ndarray
+    chi2: np.ndarray
+    front: np.ndarray
+    cost: float
+
+
+@dataclass(frozen=True)
+class _NormalBlocks:
+    """The Gauss-Newton normal equations in blocks (see `_normal_blocks`): `Hcc` (n_var,6,6), `bc` (n_var,6),
+    `Hpp` (P,3,3), `bp` (P,3), `Hcp` (nv,6,3) per observation of a variable camera, whose camera and point
+    indices are `cv` and `pv` (nv,)."""
+    Hcc: np.ndarray
+    bc: np.ndarray
+    Hpp: np.ndarray
+    bp: np.ndarray
+    Hcp: np.ndarray
+    cv: np.ndarray
+    pv: np.ndarray
+
+
 def local_bundle_adjust(slam_map: Map, local: list[int], K: np.ndarray, bf: float, inv_sigma2: np.ndarray,
                         iterations: int = 6, huber_px: float = 2.45, max_fixed: int = 20) -> BAStats | None:
     """Optimise the poses of keyframes `local` and all points they see, in place in `slam_map`."""
-    kfs = slam_map.keyframes
-    pts = slam_map.points
-    point_set = np.unique(np.concatenate([slam_map.alive_ids(kfs[i]) for i in local]))
+    point_set = np.unique(np.concatenate([slam_map.alive_ids(slam_map.keyframes[i]) for i in local]))
     if len(point_set) < 10:
         return None
-    lookup = np.full(len(pts), -1, np.int64)
-    lookup[point_set] = np.arange(len(point_set))
+    local, fixed = _variable_and_fixed(slam_map, local, max_fixed)
+    prob = _build_problem(slam_map, local, fixed, point_set, bf, inv_sigma2)
+    T_CW = inv(np.stack([slam_map.keyframes[k].T_WC for k in prob.cams]))
+    first = _evaluate(prob, T_CW, slam_map.points.pos[point_set].copy(), K, bf, huber_px)
+    est = _levenberg_marquardt(prob, first, K, bf, iterations, huber_px)
+    removed = _write_back(slam_map, prob, est)
+    return BAStats(prob.n_var, len(fixed), len(est.X), len(prob.c), first.cost, est.cost, removed)
+
+
+def _variable_and_fixed(slam_map: Map, local: list[int], max_fixed: int) -> tuple[list[int], list[int]]:
+    """The variable keyframes and the fixed ones: the `max_fixed` non-local keyframes most covisible with
+    `local`, or, when there are none, the oldest local keyframe (taken out of the variable ones)."""
     fixed_w: dict[int, int] = {}
     for i in local:
         for j, w in slam_map.covis[i].items():
@@ -53,8 +108,16 @@ def local_bundle_adjust(slam_map: Map, local: list[int], K: np.ndarray, bf: floa
         anchor = min(local)
         local = [i for i in local if i != anchor]
         fixed = [anchor]
+    return local, fixed
+
+
+def _build_problem(slam_map: Map, local: list[int], fixed: list[int], point_set: np.ndarray, bf: float,
+                   inv_sigma2: np.ndarray) -> _Problem:
+    """Every observation by keyframes `local` + `fixed` of the points `point_set`, with its measurement."""
+    kfs = slam_map.keyframes
+    lookup = np.full(len(slam_map.points), -1, np.int64)
+    lookup[point_set] = np.arange(len(point_set))
     cams = list(local) + fixed
-    n_var = len(local)
     c_idx, p_idx, kp_idx = [], [], []
     for ci, k in enumerate(cams):
         pid = kfs[k].point_ids
@@ -73,73 +136,104 @@ def local_bundle_adjust(slam_map: Map, local: list[int], K: np.ndarray, bf: floa
     info = inv_sigma2[octv]
     obs, has = rp.observations(uv, z, bf)
     roww = rp.residual_weights(has)
-    T_CW = inv(np.stack([kfs[k].T_WC for k in cams]))
-    X = pts.pos[point_set].copy()
-    P = len(X)
+    return _Problem(cams, len(local), point_set, c, p, kpi, obs, has, roww, info)
 
-    def residuals(T_CW: np.ndarray, X: np.ndarray):
-        Pc = np.einsum("nij,nj->ni", T_CW[c, :3, :3], X[p]) + T_CW[c, :3, 3]
-        front = Pc[:, 2] > 1e-3
-        e = (obs - rp.project(np.where(front[:, None], Pc, 1.0), K, bf)) * roww
-        chi2 = np.where(front, info * (e**2).sum(1), 1e6)
-        return Pc, e, chi2, front
 
-    def robust_cost(chi2: np.ndarray) -> float:
-        s = np.sqrt(chi2)
-        return float(np.where(s <= huber_px, chi2, 2 * huber_px * s - huber_px**2).sum())
+def _evaluate(prob: _Problem, T_CW: np.ndarray, X: np.ndarray, K: np.ndarray, bf: float,
+              huber_px: float) -> _Estimate:
+    """The residuals and robust (Huber) cost of poses `T_CW` (C,4,4) and points `X` (P,3)."""
+    c, p = prob.c, prob.p
+    Pc = np.einsum("nij,nj->ni", T_CW[c, :3, :3], X[p]) + T_CW[c, :3, 3]
+    front = Pc[:, 2] > 1e-3
+    e = (prob.obs - rp.project(np.where(front[:, None], Pc, 1.0), K, bf)) * prob.roww
+    chi2 = np.where(front, prob.info * (e**2).sum(1), 1e6)
+    s = np.sqrt(chi2)
+    cost = float(np.where(s <= huber_px, chi2, 2 * huber_px * s - huber_px**2).sum())
+    return _Estimate(T_CW, X, Pc, e, chi2, front, cost)
 
-    Pc, e, chi2, front = residuals(T_CW, X)
-    cost0 = cost = robust_cost(chi2)
+
+def _levenberg_marquardt(prob: _Problem, est: _Estimate, K: np.ndarray, bf: float, iterations: int,
+                         huber_px: float) -> _Estimate:
+    """Up to `iterations` LM iterations from `est`; stops early when an iteration finds no lower cost."""
     lam = 1e-3
     for _ in range(iterations):
-        w = info * rp.huber_weights(chi2, huber_px) * front
-        Jp = rp.jacobian_point(np.where(front[:, None], Pc, 1.0), K, bf) * roww[:, :, None]
-        JX = Jp @ T_CW[c, :3, :3]
-        var = c < n_var
-        cv, pv = c[var], p[var]
-        Hcc, bc, Hpp, bp, Hcp = _normal_blocks(Pc, Jp, JX, w, e, c, p, n_var, P)  # Hcp: (nv, 6, 3)
-        for _try in range(4):
-            Hcc_d = Hcc + lam * np.einsum("nii->ni", Hcc)[:, :, None] * np.eye(6) + 1e-9 * np.eye(6)
-            Hpp_d = Hpp + lam * np.einsum("nii->ni", Hpp)[:, :, None] * np.eye(3) + 1e-9 * np.eye(3)
-            Hpp_inv = np.linalg.inv(Hpp_d)
-            rows = (6 * cv[:, None, None] + np.arange(6)[None, :, None]) * np.ones((1, 1, 3), int)
-            cols = (3 * pv[:, None, None] + np.arange(3)[None, None, :]) * np.ones((1, 6, 1), int)
-            W = sp.csr_matrix((Hcp.ravel(), (rows.ravel(), cols.ravel())), shape=(6 * n_var, 3 * P))
-            br = np.repeat(np.arange(P), 9) * 3 + np.tile(np.repeat(np.arange(3), 3), P)
-            bcl = np.repeat(np.arange(P), 9) * 3 + np.tile(np.tile(np.arange(3), 3), P)
-            Vinv = sp.csr_matrix((Hpp_inv.ravel(), (br, bcl)), shape=(3 * P, 3 * P))
-            Y = W @ Vinv
-            S = _block_diag(Hcc_d) - (Y @ W.T).toarray()
-            rhs = bc.ravel() - Y @ bp.ravel()
-            try:
-                dxc = np.linalg.solve(S, rhs).reshape(n_var, 6)
-            except np.linalg.LinAlgError:
-                lam *= 10
-                continue
-            dxp = np.einsum("pij,pj->pi", Hpp_inv, bp - (W.T @ dxc.ravel()).reshape(P, 3))
-            T_new = T_CW.copy()
-            for i in range(n_var):
-                T_new[i] = exp_se3(dxc[i]) @ T_CW[i]
-            X_new = X + dxp
-            Pc_n, e_n, chi2_n, front_n = residuals(T_new, X_new)
-            cost_n = robust_cost(chi2_n)
-            if cost_n < cost:
-                T_CW, X, Pc, e, chi2, front, cost = T_new, X_new, Pc_n, e_n, chi2_n, front_n, cost_n
-                lam = max(lam / 10, 1e-7)
-                break
-            lam *= 10
-        else:
+        better, lam = _lm_iteration(prob, est, lam, K, bf, huber_px)
+        if better is None:
             break
-    for i, k in enumerate(cams[:n_var]):
-        kfs[k].T_WC = orthonormalize(inv(T_CW[i]))
-    pts.pos[point_set] = X
+        est = better
+    return est
+
+
+def _lm_iteration(prob: _Problem, est: _Estimate, lam: float, K: np.ndarray, bf: float,
+                  huber_px: float) -> tuple[_Estimate | None, float]:
+    """Linearise at `est`, then up to 4 damped steps (damping x10 after each failure): the first estimate of
+    lower cost and the damping for the next iteration, or None when all 4 failed."""
+    blocks = _linearise(prob, est, K, bf, huber_px)
+    for _try in range(4):
+        step = _solve_damped(prob, blocks, lam)
+        if step is None:
+            lam *= 10
+            continue
+        dxc, dxp = step
+        T_new = est.T_CW.copy()
+        for i in range(prob.n_var):
+            T_new[i] = exp_se3(dxc[i]) @ est.T_CW[i]
+        cand = _evaluate(prob, T_new, est.X + dxp, K, bf, huber_px)
+        if cand.cost < est.cost:
+            return cand, max(lam / 10, 1e-7)
+        lam *= 10
+    return None, lam
+
+
+def _linearise(prob: _Problem, est: _Estimate, K: np.ndarray, bf: float, huber_px: float) -> _NormalBlocks:
+    """The normal equations' blocks at `est`, with IRLS Huber weights."""
+    c, p, front = prob.c, prob.p, est.front
+    w = prob.info * rp.huber_weights(est.chi2, huber_px) * front
+    Jp = rp.jacobian_point(np.where(front[:, None], est.Pc, 1.0), K, bf) * prob.roww[:, :, None]
+    JX = Jp @ est.T_CW[c, :3, :3]
+    var = c < prob.n_var
+    cv, pv = c[var], p[var]
+    Hcc, bc, Hpp, bp, Hcp = _normal_blocks(est.Pc, Jp, JX, w, est.e, c, p, prob.n_var, len(est.X))
+    return _NormalBlocks(Hcc, bc, Hpp, bp, Hcp, cv, pv)
+
+
+def _solve_damped(prob: _Problem, b: _NormalBlocks, lam: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """The LM step at damping `lam`: pose updates (n_var,6) (twists, left-multiplied onto T_CW) and point
+    updates (P,3), by eliminating the points (Schur complement); None when the reduced system is singular."""
+    n_var, P, cv, pv = prob.n_var, len(b.Hpp), b.cv, b.pv
+    Hcc_d = b.Hcc + lam * np.einsum("nii->ni", b.Hcc)[:, :, None] * np.eye(6) + 1e-9 * np.eye(6)
+    Hpp_d = b.Hpp + lam * np.einsum("nii->ni", b.Hpp)[:, :, None] * np.eye(3) + 1e-9 * np.eye(3)
+    Hpp_inv = np.linalg.inv(Hpp_d)
+    rows = (6 * cv[:, None, None] + np.arange(6)[None, :, None]) * np.ones((1, 1, 3), int)
+    cols = (3 * pv[:, None, None] + np.arange(3)[None, None, :]) * np.ones((1, 6, 1), int)
+    W = sp.csr_matrix((b.Hcp.ravel(), (rows.ravel(), cols.ravel())), shape=(6 * n_var, 3 * P))
+    br = np.repeat(np.arange(P), 9) * 3 + np.tile(np.repeat(np.arange(3), 3), P)
+    bcl = np.repeat(np.arange(P), 9) * 3 + np.tile(np.tile(np.arange(3), 3), P)
+    Vinv = sp.csr_matrix((Hpp_inv.ravel(), (br, bcl)), shape=(3 * P, 3 * P))
+    Y = W @ Vinv
+    S = _block_diag(Hcc_d) - (Y @ W.T).toarray()
+    rhs = b.bc.ravel() - Y @ b.bp.ravel()
+    try:
+        dxc = np.linalg.solve(S, rhs).reshape(n_var, 6)
+    except np.linalg.LinAlgError:
+        return None
+    dxp = np.einsum("pij,pj->pi", Hpp_inv, b.bp - (W.T @ dxc.ravel()).reshape(P, 3))
+    return dxc, dxp
+
+
+def _write_back(slam_map: Map, prob: _Problem, est: _Estimate) -> int:
+    """Store the variable poses and the points in `slam_map`; returns how many outlier observations it erased."""
+    kfs, pts = slam_map.keyframes, slam_map.points
+    for i, k in enumerate(prob.cams[:prob.n_var]):
+        kfs[k].T_WC = orthonormalize(inv(est.T_CW[i]))
+    pts.pos[prob.point_set] = est.X
     # drop observations that stayed outliers (ORB-SLAM2 erases them from keyframe and point)
-    bad = chi2 > np.where(has, CHI2_STEREO, CHI2_MONO)
-    for ci in np.unique(c[bad]):
-        sel = bad & (c == ci)
-        kfs[cams[ci]].point_ids[kpi[sel]] = -1
-    np.subtract.at(pts.n_obs, point_set[p[bad]], 1)
-    return BAStats(n_var, len(fixed), P, len(c), cost0, cost, int(bad.sum()))
+    bad = est.chi2 > np.where(prob.has, CHI2_STEREO, CHI2_MONO)
+    for ci in np.unique(prob.c[bad]):
+        sel = bad & (prob.c == ci)
+        kfs[prob.cams[ci]].point_ids[prob.kpi[sel]] = -1
+    np.subtract.at(pts.n_obs, prob.point_set[prob.p[bad]], 1)
+    return int(bad.sum())
 
 
 def _block_diag(blocks: np.ndarray) -> np.ndarray:

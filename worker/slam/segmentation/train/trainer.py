@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 import random
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 from typing import cast
@@ -25,10 +25,10 @@ from worker.slam.segmentation.msnet.segmenter import pick_device
 from worker.slam.segmentation.tflite_teacher import read_constants
 from worker.slam.segmentation.train.bn_recalibration import recalibrate_bn
 from worker.slam.segmentation.train.config import TrainConfig
-from worker.slam.segmentation.train.data import build_training_data, expand, find_backgrounds
+from worker.slam.segmentation.train.data import TrainingData, build_training_data, expand, find_backgrounds
 from worker.slam.segmentation.train.datasets import LabelledImage, semantic_mask
 from worker.slam.segmentation.train.losses import msnet_loss
-from worker.slam.segmentation.train.mixture import EpochSampler, SoftSet
+from worker.slam.segmentation.train.mixture import EpochSampler, MixtureDataset, SoftSet
 
 
 def seed_everything(seed: int) -> None:
@@ -130,6 +130,30 @@ def param_groups(model: MSNet, cfg: TrainConfig) -> list[dict]:
             {"params": [p for p in model.parameters() if id(p) not in cnn], "lr_scale": 1.0}]
 
 
+@dataclass(frozen=True)
+class _Run:
+    """One training run's fixed parts: its config, output folder and device, its data, the model and its
+    optimiser, the EMA of the model's weights (None when `ema_decay` is 0), the per-class loss weights
+    (num_classes,) float32 on `device`, and the planned number of optimiser steps."""
+    cfg: TrainConfig
+    out: Path
+    device: torch.device
+    data: TrainingData
+    model: MSNet
+    opt: torch.optim.Optimizer
+    ema: AveragedModel | None
+    class_weights: torch.Tensor
+    total_steps: int
+
+
+@dataclass(frozen=True)
+class _Clock:
+    """Where training stands: epochs done, training seconds spent, optimiser steps taken."""
+    epoch: int
+    elapsed_s: float
+    step: int
+
+
 def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path:
     """Train MSNET as `cfg` says; returns the path of the weights-only checkpoint (`out_dir/msnet.pt`)."""
     out = Path(cfg.out_dir)
@@ -139,7 +163,44 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         torch.set_num_threads(cfg.threads)
         cv2.setNumThreads(cfg.threads)
     device = pick_device(cfg.device)
-    data = build_training_data(cfg)
+    run, clock = _start(cfg, resume, out, device, build_training_data(cfg))
+    sampler = EpochSampler(len(run.data.train))
+    loader = _loader(cfg, run.data.train, sampler)
+    elapsed, step = clock.elapsed_s, clock.step
+    for epoch in range(clock.epoch, cfg.epochs):
+        t0 = time.time()
+        sampler.epoch = epoch
+        sums, n, step = _train_epoch(run, loader, _Clock(epoch, elapsed, step), t0, progress)
+        elapsed += time.time() - t0
+        _save_epoch(run, _Clock(epoch + 1, elapsed, step), {k: v / max(n, 1) for k, v in sums.items()})
+        if progress_of(step, run.total_steps, elapsed, cfg.time_budget_min) >= 1.0:
+            break
+    finals = {"ema": cast(MSNet, run.ema.module), "raw": run.model} if run.ema is not None else {"raw": run.model}
+    finish(cfg, finals, run.data, device, out, {"train_config": cfg.to_dict(), "train_seconds": round(elapsed, 1),
+                                                 "epoch": state_epoch(out)})
+    return out / "msnet.pt"
+
+
+def _start(cfg: TrainConfig, resume: bool, out: Path, device: torch.device,
+           data: TrainingData) -> tuple[_Run, _Clock]:
+    """The model (fresh, fine-tuned from `init_weights` or pretrained), its optimiser and EMA, restored from
+    `out/last.pt` when resuming; writes `out/config.json`."""
+    model = _initial_model(cfg, resume, device)
+    opt = torch.optim.AdamW(param_groups(model, cfg), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    steps_per_epoch = max(cfg.samples_per_epoch // cfg.batch_size, 1)
+    total_steps = steps_per_epoch * cfg.epochs
+    ema = AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(cfg.ema_decay), use_buffers=True) \
+        if cfg.ema_decay > 0 else None
+    state_path = out / "last.pt"
+    clock = _restore(state_path, model, ema, opt) if resume and state_path.is_file() else _Clock(0, 0.0, 0)
+    (out / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
+    weights = torch.tensor(cfg.class_weights[:cfg.model.num_classes], dtype=torch.float32, device=device)
+    return _Run(cfg, out, device, data, model, opt, ema, weights, total_steps), clock
+
+
+def _initial_model(cfg: TrainConfig, resume: bool, device: torch.device) -> MSNet:
+    """A new model on `device`, with the weights of `init_weights` or the pretrained CNN path unless resuming
+    (a resumed run loads its own weights later)."""
     model = build_msnet(cfg.model).to(device)
     if cfg.init_weights and not (resume and (Path(cfg.out_dir) / "last.pt").is_file()):
         start, _ = load_model(cfg.path(cfg.init_weights))
@@ -150,79 +211,90 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         model.train()
     elif cfg.init_pretrained and not (resume and (Path(cfg.out_dir) / "last.pt").is_file()):
         load_pretrained_cnn(model, cfg.path(cfg.init_pretrained))
-    opt = torch.optim.AdamW(param_groups(model, cfg), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    steps_per_epoch = max(cfg.samples_per_epoch // cfg.batch_size, 1)
-    total_steps = steps_per_epoch * cfg.epochs
-    ema = AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(cfg.ema_decay), use_buffers=True) \
-        if cfg.ema_decay > 0 else None
-    start_epoch, elapsed, step = 0, 0.0, 0
-    state_path = out / "last.pt"
-    if resume and state_path.is_file():
-        state = torch.load(state_path, map_location="cpu", weights_only=False)
-        model.load_state_dict(state["model"])
-        if ema is not None and state.get("ema"):
-            ema.load_state_dict(state["ema"])
-        elif ema is not None:  # a run started without EMA begins averaging from its current weights
-            ema.module.load_state_dict(state["model"])
-        opt.load_state_dict(state["optimizer"])
-        torch.set_rng_state(state["torch_rng"])
-        start_epoch, elapsed, step = state["epoch"], state["elapsed_s"], state["step"]
-    (out / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
-    weights = torch.tensor(cfg.class_weights[:cfg.model.num_classes], dtype=torch.float32, device=device)
-    sampler = EpochSampler(len(data.train))
+    return model
+
+
+def _restore(state_path: Path, model: MSNet, ema: AveragedModel | None, opt: torch.optim.Optimizer) -> _Clock:
+    """Load the model, EMA, optimiser and torch RNG state of an interrupted run from `state_path`."""
+    state = torch.load(state_path, map_location="cpu", weights_only=False)
+    model.load_state_dict(state["model"])
+    if ema is not None and state.get("ema"):
+        ema.load_state_dict(state["ema"])
+    elif ema is not None:  # a run started without EMA begins averaging from its current weights
+        ema.module.load_state_dict(state["model"])
+    opt.load_state_dict(state["optimizer"])
+    torch.set_rng_state(state["torch_rng"])
+    return _Clock(state["epoch"], state["elapsed_s"], state["step"])
+
+
+def _loader(cfg: TrainConfig, dataset: MixtureDataset, sampler: EpochSampler) -> torch.utils.data.DataLoader:
     # spawn, not fork: forking after OpenCV/OpenMP thread pools exist can deadlock the workers.
-    loader = torch.utils.data.DataLoader(
-        data.train, batch_size=cfg.batch_size, sampler=sampler, drop_last=True, num_workers=cfg.workers,
+    return torch.utils.data.DataLoader(
+        dataset, batch_size=cfg.batch_size, sampler=sampler, drop_last=True, num_workers=cfg.workers,
         persistent_workers=cfg.workers > 0, multiprocessing_context="spawn" if cfg.workers > 0 else None,
         worker_init_fn=partial(init_worker, cfg.seed))
-    for epoch in range(start_epoch, cfg.epochs):
-        t0 = time.time()
-        sampler.epoch = epoch
-        model.train()
-        sums: dict[str, float] = {}
-        n = 0
-        bar = tqdm(loader, desc=f"epoch {epoch + 1}/{cfg.epochs}", disable=not progress, unit="batch")
-        for n, batch in enumerate(bar, 1):
-            done = progress_of(step, total_steps, elapsed + time.time() - t0, cfg.time_budget_min)
-            if done >= 1.0:
-                break
-            lr = cfg.lr * lr_factor(done, cfg.warmup_fraction)
-            for group in opt.param_groups:
-                group["lr"] = lr * group.get("lr_scale", 1.0)  # absent in the optimiser state of older runs
-            step += 1
-            batch = {k: v.to(device) for k, v in batch.items()}
-            loss, parts = msnet_loss(model(batch["image"]), batch["hard"], batch["soft"], batch["kd_mask"], weights,
-                                     cfg.kd_weight, cfg.query_weight)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
-            opt.step()
-            if ema is not None:
-                ema.update_parameters(model)
-            for k, v in parts.items():
-                sums[k] = sums.get(k, 0.0) + v
-            bar.set_postfix(loss=f"{sums['loss'] / n:.3f}")
-        elapsed += time.time() - t0
-        record = {"epoch": epoch + 1, "step": step, "lr": opt.param_groups[0]["lr"], "elapsed_s": round(elapsed, 1),
-                  **{k: v / max(n, 1) for k, v in sums.items()}}
-        final = cast(MSNet, ema.module if ema is not None else model)
-        record.update(evaluate_all(final, data, device))
-        with open(out / "metrics.jsonl", "a") as f:
-            f.write(json.dumps(record) + "\n")
-        torch.save({"model": model.state_dict(), "optimizer": opt.state_dict(), "torch_rng": torch.get_rng_state(),
-                    "epoch": epoch + 1, "step": step, "elapsed_s": elapsed,
-                    "ema": ema.state_dict() if ema is not None else None}, state_path.with_suffix(".tmp"))
-        state_path.with_suffix(".tmp").replace(state_path)
-        meta = {"epoch": epoch + 1, "train_seconds": round(elapsed, 1), "train_config": cfg.to_dict(),
-                **{k: v for k, v in record.items() if k.startswith(("val_", "train_target"))}}
-        save_model(out / "msnet.pt", final, meta)
-        save_model(out / f"epoch{epoch + 1:03d}.pt", final, meta)  # for later inspection and selection
-        if progress_of(step, total_steps, elapsed, cfg.time_budget_min) >= 1.0:
+
+
+def _train_epoch(run: _Run, loader: torch.utils.data.DataLoader, clock: _Clock, t0: float,
+                 progress: bool) -> tuple[dict[str, float], int, int]:
+    """Epoch `clock.epoch + 1`: one pass over `loader` from `clock` (it started at time `t0`), stopping when the
+    steps or the time budget run out: the loss parts summed over the batches, the batches drawn (counting the one
+    that found the budget spent), and the step reached."""
+    cfg, step = run.cfg, clock.step
+    run.model.train()
+    sums: dict[str, float] = {}
+    n = 0
+    bar = tqdm(loader, desc=f"epoch {clock.epoch + 1}/{cfg.epochs}", disable=not progress, unit="batch")
+    for n, batch in enumerate(bar, 1):
+        done = progress_of(step, run.total_steps, clock.elapsed_s + time.time() - t0, cfg.time_budget_min)
+        if done >= 1.0:
             break
-    finals = {"ema": cast(MSNet, ema.module), "raw": model} if ema is not None else {"raw": model}
-    finish(cfg, finals, data, device, out, {"train_config": cfg.to_dict(), "train_seconds": round(elapsed, 1),
-                                             "epoch": state_epoch(out)})
-    return out / "msnet.pt"
+        lr = cfg.lr * lr_factor(done, cfg.warmup_fraction)
+        for group in run.opt.param_groups:
+            group["lr"] = lr * group.get("lr_scale", 1.0)  # absent in the optimiser state of older runs
+        step += 1
+        parts = _train_step(run, batch)
+        for k, v in parts.items():
+            sums[k] = sums.get(k, 0.0) + v
+        bar.set_postfix(loss=f"{sums['loss'] / n:.3f}")
+    return sums, n, step
+
+
+def _train_step(run: _Run, batch: dict[str, torch.Tensor]) -> dict[str, float]:
+    """One optimiser step (gradients clipped to norm 5) and EMA update on `batch`; returns the loss parts."""
+    cfg = run.cfg
+    batch = {k: v.to(run.device) for k, v in batch.items()}
+    loss, parts = msnet_loss(run.model(batch["image"]), batch["hard"], batch["soft"], batch["kd_mask"],
+                             run.class_weights, cfg.kd_weight, cfg.query_weight)
+    run.opt.zero_grad(set_to_none=True)
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(run.model.parameters(), 5.0)
+    run.opt.step()
+    if run.ema is not None:
+        run.ema.update_parameters(run.model)
+    return parts
+
+
+def _save_epoch(run: _Run, clock: _Clock, means: dict[str, float]) -> None:
+    """After epoch `clock.epoch`: its record (mean loss parts `means`, validation) appended to `metrics.jsonl`,
+    the resumable state in `last.pt`, and the weights (the EMA's when there is one) in `msnet.pt` and
+    `epochNNN.pt`."""
+    out, model, opt, ema = run.out, run.model, run.opt, run.ema
+    record = {"epoch": clock.epoch, "step": clock.step, "lr": opt.param_groups[0]["lr"],
+              "elapsed_s": round(clock.elapsed_s, 1), **means}
+    final = cast(MSNet, ema.module if ema is not None else model)
+    record.update(evaluate_all(final, run.data, run.device))
+    with open(out / "metrics.jsonl", "a") as f:
+        f.write(json.dumps(record) + "\n")
+    state_path = out / "last.pt"
+    torch.save({"model": model.state_dict(), "optimizer": opt.state_dict(), "torch_rng": torch.get_rng_state(),
+                "epoch": clock.epoch, "step": clock.step, "elapsed_s": clock.elapsed_s,
+                "ema": ema.state_dict() if ema is not None else None}, state_path.with_suffix(".tmp"))
+    state_path.with_suffix(".tmp").replace(state_path)
+    meta = {"epoch": clock.epoch, "train_seconds": round(clock.elapsed_s, 1), "train_config": run.cfg.to_dict(),
+            **{k: v for k, v in record.items() if k.startswith(("val_", "train_target"))}}
+    save_model(out / "msnet.pt", final, meta)
+    save_model(out / f"epoch{clock.epoch:03d}.pt", final, meta)  # for later inspection and selection
 
 
 def state_epoch(out: Path) -> int | None:
