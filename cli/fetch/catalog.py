@@ -11,6 +11,7 @@ the check becomes exact.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 TUM_BASE = "https://cvg.cit.tum.de/rgbd/dataset/"
 BONN_BASE = "https://www.ipb.uni-bonn.de/html/projects/rgbd_dynamic2019/"
@@ -97,3 +98,17 @@ def lookup(name: str) -> Dataset:
         if name in (d.folder, d.filename):
             return d
     raise KeyError(name)
+
+
+def table_sequences(table: str, data: Path) -> tuple[list[tuple[Dataset, Path]], list[Dataset]]:
+    """A bench table's sequences fetched into ``data`` (each with its folder), and those not there."""
+    if table not in TABLES:
+        raise KeyError(table)
+    present, missing = [], []
+    for ds in (DATASETS[n] for n in TABLES[table]):
+        folder = Path(data) / ds.folder
+        if (folder / "rgb.txt").is_file() and (folder / "depth.txt").is_file():
+            present.append((ds, folder))
+        else:
+            missing.append(ds)
+    return present, missing

@@ -284,3 +284,24 @@ def test_an_archive_with_a_path_trick_is_refused_by_the_safe_extraction(tmp_path
         fetch(TUM, to, url_base=server.base)
     _nothing_half_done(to)
     assert not (tmp_path / "escaped.txt").exists() and not (to / STAGING).exists()  # the .part is deleted too
+
+
+def test_a_named_bench_table_runs_what_was_fetched_and_skips_the_rest(tmp_path, server, archives):
+    import subprocess
+    import sys
+
+    from cli.fetch.catalog import table_sequences
+
+    _serve(server, archives)
+    fetch(TUM, tmp_path, url_base=server.base)
+    present, missing = table_sequences("tum-walking", tmp_path)
+    assert present == [(TUM, tmp_path / TUM.folder)] and len(missing) == 3
+    bench = Path(__file__).resolve().parents[2] / "bench" / "bench_dynamic.py"
+    run = subprocess.run([sys.executable, str(bench), "--table", "tum-walking", "--data", str(tmp_path),
+                          "--presets", "orb-only", "--max-frames", "3"], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert f"| {TUM.folder} | orb-only | 3 |" in run.stdout
+    assert "skipping tum-fr3-walking-static" in run.stderr and "vtdslam fetch" in run.stderr
+    empty = subprocess.run([sys.executable, str(bench), "--table", "bonn-crowd", "--data", str(tmp_path)],
+                           capture_output=True, text=True, timeout=120)
+    assert empty.returncode != 0 and "none of its sequences" in empty.stderr
