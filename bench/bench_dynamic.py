@@ -2,6 +2,11 @@
 
     .venv/bin/python bench/bench_dynamic.py --sequence DIR:CAMERA [--sequence ...] [--presets a,b] \
         [--max-frames N] [--config JSON] [--summary] [--teacher TFLITE] [--starts 0,2,4,6]
+    .venv/bin/python bench/bench_dynamic.py --table tum-walking|bonn-crowd --data DIR [...]
+
+`--table` runs a named table on the sequences `vtdslam fetch` put in DIR (`vtdslam fetch tum-walking --to DIR`):
+`tum-walking` the paper's four TUM fr3 walking sequences (xyz, static, rpy, halfsphere), `bonn-crowd` Bonn's
+crowd, crowd2 and crowd3, each with its own camera; a sequence not fetched is skipped with a message.
 
 `--teacher` adds, for each preset that segments, the same run with that TFLite model as its segmenter (e.g.
 the DeepLabV3 teacher), so MSNET and the teacher are compared in one table (`marked area`: the mean share of
@@ -35,6 +40,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from cli.fetch.catalog import TABLES, table_sequences  # noqa: E402
 from worker.slam.camera import parse_camera  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.pipeline import run_pipeline  # noqa: E402
@@ -98,7 +104,10 @@ def _guided_cell(cull: dict) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sequence", action="append", required=True, help="DIR:CAMERA")
+    ap.add_argument("--sequence", action="append", default=[], help="DIR:CAMERA")
+    ap.add_argument("--table", default=None, choices=sorted(TABLES),
+                    help="a named table: its sequences as `vtdslam fetch` unpacked them into --data")
+    ap.add_argument("--data", default=None, metavar="DIR", help="where `vtdslam fetch` put the --table's sequences")
     ap.add_argument("--presets", default="orb-only,geometry-only,no-restoration,full")
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--config", default=None, help="JSON overrides applied to every preset")
@@ -111,6 +120,10 @@ def main() -> None:
     ap.add_argument("--references", action="store_true",
                     help="also run `people-free` and `masks removed` on each sequence's truth backgrounds")
     args = ap.parse_args()
+    if args.table:
+        args.sequence += table_specs(args.table, args.data or ap.error("--table needs --data DIR"))
+    if not args.sequence:
+        ap.error("give --sequence DIR:CAMERA or --table NAME --data DIR")
     overrides = json.loads(args.config) if args.config else None
     try:
         starts = [int(k) for k in args.starts.split(",")]
@@ -146,6 +159,17 @@ def main() -> None:
                     print_row(rows[-1])
     if args.summary:
         print_summary(rows)
+
+
+def table_specs(table: str, data: str) -> list[str]:
+    """The `--sequence` specs of a named table's fetched sequences; the missing ones are named on stderr."""
+    present, missing = table_sequences(table, Path(data))
+    for ds in missing:
+        print(f"skipping {ds.name}: no {Path(data) / ds.folder} (`vtdslam fetch {ds.name} --to {data}`)",
+              file=sys.stderr)
+    if not present:
+        raise SystemExit(f"--table {table}: none of its sequences is in {data}")
+    return [f"{folder}:{ds.camera}" for ds, folder in present]
 
 
 def teacher_overrides(model: str) -> dict:

@@ -9,6 +9,7 @@ from cli import (
     augment_cmd,
     demo_cmd,
     eval_cmd,
+    fetch_cmd,
     inspect_cmd,
     msnet_cmd,
     run_cmd,
@@ -25,8 +26,8 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-for module in (augment_cmd, demo_cmd, eval_cmd, inspect_cmd, msnet_cmd, run_cmd, serve_cmd, synth_cmd, viewer_cmd,
-               worker_cmd):
+for module in (augment_cmd, demo_cmd, eval_cmd, fetch_cmd, inspect_cmd, msnet_cmd, run_cmd, serve_cmd, synth_cmd,
+               viewer_cmd, worker_cmd):
     module.register(app)
 
 
