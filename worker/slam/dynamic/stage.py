@@ -21,6 +21,7 @@ from worker.slam.dynamic.culling import CullingConfig, CullingResult, cull_frame
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.types import Features
 from worker.slam.geometry.se3 import inv
+from worker.slam.history import PastFrame
 from worker.slam.io.sequence import Frame
 from worker.slam.stages import FrameInputs, StageContext
 
@@ -86,49 +87,73 @@ class CullingStage:
         if not isinstance(feats, Features):
             feats = self.prepare(frame)
         removed = np.zeros(len(feats), bool)
-        last = ctx.last
         history = ctx.history.recent(self.history_frames)
         compared = bool(history) and len(feats) > 0
         if compared:
-            past = history[0]  # `lag_frames` back (the first frame at the start)
-            assert past.extracted is not None, "culling's own output: it runs on every frame"
-            prev_feats, prev_depth = past.extracted, past.depth
-            cov = last.covariance if last is not None else None
-            T_pred = ctx.T_WC_pred
-            T_cur_prev = inv(T_pred) @ past.T_WC if T_pred is not None and past.T_WC is not None else None
-            cfg = self.cfg.culling
-            if not self.use_segmentation:
-                cfg = dataclasses.replace(cfg, use_segmentation=False)
-            t0 = time.perf_counter()
-            res = cull_frame(prev_feats.uv, prev_feats.desc, feats.uv, feats.desc, frame.depth,
-                             inputs.potentially_dynamic if self.use_segmentation else None, cov, cfg,
-                             prev_depth, self.camera.K, T_cur_prev)
-            self.decision_ms.append(1000 * (time.perf_counter() - t0))
-            removed = res.removed(feats.uv)
-            removed = self._readmit(removed, feats.uv, res.dynamic_mask, inputs.info)
-            self.compared += 1
-            self.guided += res.guided
-            self.not_judged += not res.judged
-            self.without_objects += res.without_objects
-            self.marks_trusted += res.marks_trusted
-            if res.judged and not res.marks_trusted:  # trusted marks are excluded unjudged (`judge_marks_above`)
-                self.segments_judged += sum(s.kind == "semantic" for s in res.segments)
-            self.object_thresholds += sum(s.object_level for s in res.segments)
-            self.last = res
-            inputs.exclude_mask = res.exclude_mask
-            inputs.dynamic_mask = res.dynamic_mask
-            inputs.info.update(dynamic_fraction=float(res.dynamic_mask.mean()), threshold_px=res.threshold_px,
-                               dynamic_segments=sum(s.dynamic for s in res.segments),
-                               segments=len(res.segments),
-                               object_thresholds=sum(s.object_level for s in res.segments), judged=res.judged)
-            if res.entropy is not None:
-                inputs.info["motion_entropy"] = res.entropy
-            inputs.culled = removed
+            removed = self._cull(frame, inputs, ctx, feats, history[0])  # `lag_frames` back (the first at the start)
         elif self.use_segmentation and inputs.potentially_dynamic is not None and len(feats):
             # Nothing to compare with yet (first frame): keep potentially dynamic objects out of the new map.
             inputs.exclude_mask = dilate_disc(inputs.potentially_dynamic, self.cfg.culling.dilation_px)
             inputs.dynamic_mask = inputs.potentially_dynamic
             removed = mask_at(inputs.exclude_mask, feats.uv)
+        self._hand_over(frame, inputs, feats, removed, compared)
+        return inputs
+
+    def _cull(self, frame: Frame, inputs: FrameInputs, ctx: StageContext, feats: Features,
+              past: PastFrame) -> np.ndarray:
+        """Which of the frame's features `feats` (N,) culling removes, bool (N,), judged against `past`; its masks
+        and figures go into `inputs`, its counts into the stage's."""
+        res = self._judge(frame, inputs, ctx, feats, past)
+        removed = res.removed(feats.uv)
+        removed = self._readmit(removed, feats.uv, res.dynamic_mask, inputs.info)
+        self._count(res)
+        self.last = res
+        inputs.exclude_mask = res.exclude_mask
+        inputs.dynamic_mask = res.dynamic_mask
+        inputs.info.update(dynamic_fraction=float(res.dynamic_mask.mean()), threshold_px=res.threshold_px,
+                           dynamic_segments=sum(s.dynamic for s in res.segments),
+                           segments=len(res.segments),
+                           object_thresholds=sum(s.object_level for s in res.segments), judged=res.judged)
+        if res.entropy is not None:
+            inputs.info["motion_entropy"] = res.entropy
+        inputs.culled = removed
+        return removed
+
+    def _judge(self, frame: Frame, inputs: FrameInputs, ctx: StageContext, feats: Features,
+               past: PastFrame) -> CullingResult:
+        """`cull_frame` on the frame's features against the past frame's (with the motion predicted between
+        them and the last tracked pose's covariance, where known); its wall time goes into `decision_ms`."""
+        assert past.extracted is not None, "culling's own output: it runs on every frame"
+        prev_feats, prev_depth = past.extracted, past.depth
+        last = ctx.last
+        cov = last.covariance if last is not None else None
+        T_pred = ctx.T_WC_pred
+        T_cur_prev = inv(T_pred) @ past.T_WC if T_pred is not None and past.T_WC is not None else None
+        cfg = self.cfg.culling
+        if not self.use_segmentation:
+            cfg = dataclasses.replace(cfg, use_segmentation=False)
+        t0 = time.perf_counter()
+        res = cull_frame(prev_feats.uv, prev_feats.desc, feats.uv, feats.desc, frame.depth,
+                         inputs.potentially_dynamic if self.use_segmentation else None, cov, cfg,
+                         prev_depth, self.camera.K, T_cur_prev)
+        self.decision_ms.append(1000 * (time.perf_counter() - t0))
+        return res
+
+    def _count(self, res: CullingResult) -> None:
+        """Add a compared frame's result to the run-level counts (`summary`)."""
+        self.compared += 1
+        self.guided += res.guided
+        self.not_judged += not res.judged
+        self.without_objects += res.without_objects
+        self.marks_trusted += res.marks_trusted
+        if res.judged and not res.marks_trusted:  # trusted marks are excluded unjudged (`judge_marks_above`)
+            self.segments_judged += sum(s.kind == "semantic" for s in res.segments)
+        self.object_thresholds += sum(s.object_level for s in res.segments)
+
+    def _hand_over(self, frame: Frame, inputs: FrameInputs, feats: Features, removed: np.ndarray,
+                   compared: bool) -> None:
+        """Give the tracker the features `feats` not `removed` (N,) bool -- extracted again outside the exclusion
+        mask when culling left too few -- and the removed ones held back; count them."""
         inputs.features = feats.select(~removed)
         starved = (~removed).sum() < self.cfg.refill_below * self.extractor.cfg.n_features
         # only frames culling compared: a first frame's exclusion is the unjudged network mask, and a map started
@@ -142,7 +167,6 @@ class CullingStage:
         self.removed_total += int(removed.sum())
         self.kept_total += int((~removed).sum())
         inputs.extracted = feats
-        return inputs
 
     def _readmit(self, removed: np.ndarray, uv: np.ndarray, dynamic: np.ndarray, info: dict) -> np.ndarray:
         """`removed` (N,) with band keypoints (removed, not on `dynamic` (H, W)) given back up to the minimum."""

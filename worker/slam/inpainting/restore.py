@@ -15,8 +15,9 @@ import numpy as np
 from numba import njit
 
 from worker.slam.config import valid
-from worker.slam.inpainting.align import hole_ring, ring_shift
+from worker.slam.inpainting.align import Ring, hole_ring, ring_shift
 from worker.slam.inpainting.border_fill import fill_depth_from_border, harmonic_fill
+from worker.slam.inpainting.gain import colour_gain
 from worker.slam.inpainting.patchmatch import PatchMatchConfig, patchmatch_fill
 from worker.slam.inpainting.refine import PoseRefinementConfig, PoseRefiner
 from worker.slam.inpainting.warp import depth_in_target, forward_warp, relative_pose, sample_reference
@@ -65,7 +66,7 @@ class RestorationConfig:
     object hidden entirely inside the hole is guessed, not seen."""
     colour_gain: bool = True
     """Scale each reference's copied colours by its per-channel gain to the target, measured on the static
-    pixels around the hole that the reference sees too: real cameras change exposure between frames."""
+    pixels around the hole that the reference sees too (`gain.py`): real cameras change exposure between frames."""
     align_px: int = valid(0, 0, 32)
     """> 0: each reference's colours are taken up to this many whole pixels away from where geometry puts them:
     the shift that best matches the static ring around the hole (`align.ring_shift`; needs `subpixel`). Off:
@@ -121,20 +122,104 @@ class Restoration:
 def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np.ndarray,
                   refs: list[ReferenceView], K: np.ndarray,
                   config: RestorationConfig = RestorationConfig()) -> Restoration:
-    """Fill `hole` (H, W) bool in `rgb` (H, W, 3) uint8 and `depth` (H, W) float32 of a frame at pose T_WC."""
+    """Fill `hole` (H, W) bool in `rgb` (H, W, 3) uint8 and `depth` (H, W) float32 of a frame at pose T_WC.
+
+    In order: every reference is warped into the hole (`_warp_references`); pixels references see take their
+    blended colour and depth (`_blend_geometry`); the rest are filled by `config.unseen_fill`; depth comes
+    through the final matches, else from the hole's border (`_restored_depth`)."""
     h, w = hole.shape
     if not hole.any():
         return Restoration(rgb.copy(), depth.copy(), np.zeros((h, w), np.float32), hole, hole.copy(), 0.0, 0.0)
-    py, px = np.nonzero(hole)
-    region = (int(py.min()), int(py.max()) + 1, int(px.min()), int(px.max()) + 1)
-    sources, valid, rel, gains, landed = [], [], [], [], []
-    init_src = np.full(len(py), -1, np.int64)
-    init_yx = np.full((len(py), 2), -1, np.int64)
-    ry, rx = py - region[0], px - region[2]
+    pix = _HolePixels.of(hole)
+    warps = _warp_references(rgb, depth, hole, T_WC, refs, K, config, pix)
+    sources, valid, self_index = _sources(rgb, hole, refs, warps, config)
+    matches = _Matches(warps.init_src.copy(), warps.init_yx.copy(), np.zeros(len(pix.py)))
+    out_rgb = rgb.copy()
+    geo = warps.init_src >= 0
+    d = np.zeros(len(pix.py), np.float32)  # each hole pixel's depth in the target, through its match
+    if config.geometry_first and geo.any():
+        _blend_geometry(rgb, depth, hole, refs, K, config, pix, warps, out_rgb, d)
+    search = ~geo if config.geometry_first else np.ones(len(pix.py), bool)
+    if search.any() and config.unseen_fill in ("telea", "harmonic"):
+        _smooth_fill(out_rgb, hole, pix.py[search], pix.px[search], config.unseen_fill)
+        matches.src[search], matches.cost[search] = self_index, np.inf  # from the frame itself, with no depth
+    elif search.any():
+        out_rgb = _patchmatch_fill(out_rgb, hole, pix, search, sources, valid, warps, config.patchmatch, matches)
+    todo = ~geo if config.geometry_first else np.ones(len(pix.py), bool)  # geometry's matches have their depth
+    _match_depths(refs, K, warps, matches, todo, d)
+    out_depth, confidence = _restored_depth(depth, hole, pix, d, matches, geo, config)
+    n = max(len(pix.py), 1)
+    from_self = float(np.sum(matches.src == self_index)) / n
+    seen = np.zeros_like(hole)
+    seen[pix.py[geo], pix.px[geo]] = True
+    return Restoration(out_rgb, out_depth, confidence, hole, seen, 1.0 - from_self if refs else 0.0, from_self,
+                       warps.refined)
+
+
+@dataclass(frozen=True)
+class _HolePixels:
+    """The hole's N pixels in row-major order: `py`, `px` (N,) int64 image rows and columns; `region`
+    (y0, y1, x0, x1) their bounding box; `ry`, `rx` (N,) int64 the same pixels relative to the box."""
+
+    py: np.ndarray
+    px: np.ndarray
+    region: tuple[int, int, int, int]
+    ry: np.ndarray
+    rx: np.ndarray
+
+    @staticmethod
+    def of(hole: np.ndarray) -> _HolePixels:
+        """The pixels of `hole` (H, W) bool, which has at least one."""
+        py, px = np.nonzero(hole)
+        region = (int(py.min()), int(py.max()) + 1, int(px.min()), int(px.max()) + 1)
+        return _HolePixels(py, px, region, py - region[0], px - region[2])
+
+
+@dataclass(frozen=True)
+class _Warps:
+    """The references warped into the target, one entry per reference in order: `rel` (4, 4) reference camera
+    -> target camera (photometrically refined if enabled), `valid` (H, W) bool its static pixels, `gains` (3,)
+    float64 its colour gain to the target, `landed` (h, w, 2) int64 the reference pixel that lands on each pixel
+    of the hole's region (-1: none, `forward_warp`). Per hole pixel: `init_src` (N,) int64 the first (best)
+    reference that lands there (-1: none) and `init_yx` (N, 2) int64 its pixel. `refined`: references whose
+    pose the refinement corrected."""
+
+    rel: list[np.ndarray]
+    valid: list[np.ndarray]
+    gains: list[np.ndarray]
+    landed: list[np.ndarray]
+    init_src: np.ndarray
+    init_yx: np.ndarray
+    refined: int
+
+
+@dataclass(frozen=True)
+class _Matches:
+    """Each hole pixel's final match, filled in place as the steps decide: `src` (N,) int64 the source image
+    (a reference's index, the target's own `self_index`, -1 none), `yx` (N, 2) int64 the pixel there, `cost`
+    (N,) float64 its patch cost (0 for geometry's matches, inf for smooth fills)."""
+
+    src: np.ndarray
+    yx: np.ndarray
+    cost: np.ndarray
+
+
+def _warp_references(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np.ndarray,
+                     refs: list[ReferenceView], K: np.ndarray, config: RestorationConfig,
+                     pix: _HolePixels) -> _Warps:
+    """Each reference's relative pose (refined against the target's static pixels if enabled), its static
+    pixels forward-warped into the hole's region and its colour gain; the first reference landing on each hole
+    pixel is its starting match (references in order of preference)."""
+    init_src = np.full(len(pix.py), -1, np.int64)
+    init_yx = np.full((len(pix.py), 2), -1, np.int64)
     refiner = None
     if config.refine.enabled and refs:
-        refiner = PoseRefiner(rgb, depth, ~hole, K, hole_ring(rgb, depth, hole, region, config.refine.check_ring_px),
-                              config.refine)
+        ring = hole_ring(rgb, depth, hole, pix.region, config.refine.check_ring_px)
+        refiner = PoseRefiner(rgb, depth, ~hole, K, ring, config.refine)
+    rel: list[np.ndarray] = []
+    valid: list[np.ndarray] = []
+    gains: list[np.ndarray] = []
+    landed: list[np.ndarray] = []
     refined = 0
     for s, ref in enumerate(refs):
         rel.append(relative_pose(ref.T_WC, T_WC))
@@ -142,92 +227,130 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
         if refiner is not None:
             rel[-1], better = refiner.refine(ref.rgb, ref.depth, valid[-1], rel[-1])
             refined += better
-        landed_region = forward_warp(ref.depth, valid[-1], rel[-1], K, region)
-        gains.append(_colour_gain(rgb, hole, ref.rgb, landed_region, region) if config.colour_gain
+        landed_region = forward_warp(ref.depth, valid[-1], rel[-1], K, pix.region)
+        gains.append(colour_gain(rgb, hole, ref.rgb, landed_region, pix.region) if config.colour_gain
                      else np.ones(3))
         # pixels no earlier (better) reference reached take this one's
-        first, yx = _landings(landed_region, ry, rx, (init_src >= 0).astype(np.int64), 1)
+        first, yx = _landings(landed_region, pix.ry, pix.rx, (init_src >= 0).astype(np.int64), 1)
         init_src[first], init_yx[first] = s, yx
         landed.append(landed_region)
-        sources.append(ref.rgb)
+    return _Warps(rel, valid, gains, landed, init_src, init_yx, refined)
+
+
+def _sources(rgb: np.ndarray, hole: np.ndarray, refs: list[ReferenceView], warps: _Warps,
+             config: RestorationConfig) -> tuple[list[np.ndarray], list[np.ndarray], int]:
+    """PatchMatch's source images (H, W, 3) uint8 and their copyable pixels (H, W) bool: the references, then
+    the target itself (away from the hole) if it may be copied from; and the target's index (-1: not a source)."""
+    sources = [ref.rgb for ref in refs]
+    valid = list(warps.valid)
     self_index = -1
     if config.use_target_as_source or not refs:
         self_index = len(sources)
         sources.append(rgb)
         valid.append(~cv2.dilate(hole.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool))
-    src_all, yx_all = init_src.copy(), init_yx.copy()
-    cost_all = np.zeros(len(py))
-    out_rgb = rgb.copy()
-    geo = init_src >= 0
-    d = np.zeros(len(py), np.float32)  # each hole pixel's depth in the target, through its match
-    if config.geometry_first and geo.any():
-        aligned = config.align_px and config.subpixel  # the shift moves the sub-pixel samples
-        ring = hole_ring(rgb, depth, hole, region, config.align_ring_px) if aligned else None
-        # each pixel averages up to `blend_refs` references that agree with the depth averaged so far
-        acc, z_acc = np.zeros((len(py), 3)), np.zeros(len(py))
-        n_acc = np.zeros(len(py), np.int64)
-        for s, ref in enumerate(refs):
-            sel, yx_sel = _landings(landed[s], ry, rx, n_acc, config.blend_refs)
-            if not len(sel):
-                continue
-            z = depth_in_target(ref.depth, yx_sel, rel[s], K)
-            agree = _agreeing(sel, z, z_acc, n_acc, config.blend_depth_tol)
-            if not agree.all():
-                sel, yx_sel, z = sel[agree], yx_sel[agree], z[agree]
-            col = ref.rgb[yx_sel[:, 0], yx_sel[:, 1]]
-            if config.subpixel:
-                shift = (0, 0)
-                if ring is not None:
-                    ref_grey = cv2.cvtColor(ref.rgb, cv2.COLOR_RGB2GRAY)
-                    shift = ring_shift(ring, ref_grey, valid[s], np.linalg.inv(rel[s]), K, config.align_px)
-                sub, ok = sample_reference(ref.rgb, valid[s], np.stack([py[sel], px[sel]], 1), z, rel[s], K,
-                                           shift)
-                col = np.where(ok[:, None], sub, col)
-            _accumulate(acc, z_acc, n_acc, sel, col, np.asarray(gains[s], np.float64), z)
-        done = np.flatnonzero(n_acc > 0)
-        n_done = n_acc[done].astype(np.float64)
-        d[done] = z_acc[done] / n_done
-        out_rgb[py[done], px[done]] = np.clip(acc[done] / n_done[:, None] + 0.5, 0, 255).astype(np.uint8)
-    search = ~geo if config.geometry_first else np.ones(len(py), bool)
-    if search.any() and config.unseen_fill in ("telea", "harmonic"):
-        fy, fx = py[search], px[search]
-        if config.unseen_fill == "telea":
-            # on the fill's bounding box (+ the inpainting radius): the same result without whole-image passes
-            y0, y1 = max(int(fy.min()) - 4, 0), min(int(fy.max()) + 5, h)
-            x0, x1 = max(int(fx.min()) - 4, 0), min(int(fx.max()) + 5, w)
-            box = np.zeros((y1 - y0, x1 - x0), np.uint8)
-            box[fy - y0, fx - x0] = 1
-            out_rgb[y0:y1, x0:x1] = cv2.inpaint(np.ascontiguousarray(out_rgb[y0:y1, x0:x1]), box, 3,
-                                                cv2.INPAINT_TELEA)
-        else:
-            fill = np.zeros_like(hole)
-            fill[fy, fx] = True
+    return sources, valid, self_index
 
-            def colours(rows: slice, cols: slice) -> tuple[np.ndarray, np.ndarray]:
-                patch = out_rgb[rows, cols].astype(np.float32)
-                return patch, np.ones(patch.shape[:2], bool)  # every colour outside `fill` is known
 
-            col = harmonic_fill(fill, colours, (fy, fx))
-            out_rgb[fy, fx] = np.clip(col + 0.5, 0, 255).astype(np.uint8)
-        src_all[search], cost_all[search] = self_index, np.inf  # from the frame itself, with no depth
-    elif search.any():
-        # PatchMatch visits only the pixels it must fill, so its cost scales with them, not the image.
-        pm_hole = np.zeros_like(hole)
-        pm_hole[py[search], px[search]] = True
-        res = patchmatch_fill(out_rgb, pm_hole, np.stack(sources), np.stack(valid), init_src[search],
-                              init_yx[search], config.patchmatch)
-        out_rgb = res.rgb
-        src_all[search], yx_all[search], cost_all[search] = res.source, res.yx, res.cost
-    todo = ~geo if config.geometry_first else np.ones(len(py), bool)  # geometry's matches have their depth
+def _blend_geometry(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, refs: list[ReferenceView],
+                    K: np.ndarray, config: RestorationConfig, pix: _HolePixels, warps: _Warps,
+                    out_rgb: np.ndarray, d: np.ndarray) -> None:
+    """Hole pixels references see through geometry: written into `out_rgb` (H, W, 3) uint8 and their depth in
+    the target into `d` (N,) float32, each averaging up to `blend_refs` references (at their gains) that agree
+    with the depth averaged so far."""
+    aligned = config.align_px and config.subpixel  # the shift moves the sub-pixel samples
+    ring = hole_ring(rgb, depth, hole, pix.region, config.align_ring_px) if aligned else None
+    acc, z_acc = np.zeros((len(pix.py), 3)), np.zeros(len(pix.py))
+    n_acc = np.zeros(len(pix.py), np.int64)
     for s, ref in enumerate(refs):
-        m = todo & (src_all == s)
+        sel, yx_sel = _landings(warps.landed[s], pix.ry, pix.rx, n_acc, config.blend_refs)
+        if not len(sel):
+            continue
+        z = depth_in_target(ref.depth, yx_sel, warps.rel[s], K)
+        agree = _agreeing(sel, z, z_acc, n_acc, config.blend_depth_tol)
+        if not agree.all():
+            sel, yx_sel, z = sel[agree], yx_sel[agree], z[agree]
+        col = ref.rgb[yx_sel[:, 0], yx_sel[:, 1]]
+        if config.subpixel:
+            col = _subpixel_colours(ref, warps.valid[s], warps.rel[s], K, ring, config.align_px,
+                                    np.stack([pix.py[sel], pix.px[sel]], 1), z, col)
+        _accumulate(acc, z_acc, n_acc, sel, col, np.asarray(warps.gains[s], np.float64), z)
+    done = np.flatnonzero(n_acc > 0)
+    n_done = n_acc[done].astype(np.float64)
+    d[done] = z_acc[done] / n_done
+    out_rgb[pix.py[done], pix.px[done]] = np.clip(acc[done] / n_done[:, None] + 0.5, 0, 255).astype(np.uint8)
+
+
+def _subpixel_colours(ref: ReferenceView, valid: np.ndarray, rel: np.ndarray, K: np.ndarray, ring: Ring | None,
+                      align_px: int, target_yx: np.ndarray, z: np.ndarray, nearest: np.ndarray) -> np.ndarray:
+    """(K, 3) colours of target pixels `target_yx` (K, 2) at depths `z` (K,) m, taken at the exact sub-pixel
+    point of the reference (T_tr `rel`) they come from, shifted to match `ring` if given; `nearest` (K, 3)
+    (the splat's pixels) where a bilinear neighbour is not in `valid` (H, W) bool."""
+    shift = (0, 0)
+    if ring is not None:
+        ref_grey = cv2.cvtColor(ref.rgb, cv2.COLOR_RGB2GRAY)
+        shift = ring_shift(ring, ref_grey, valid, np.linalg.inv(rel), K, align_px)
+    sub, ok = sample_reference(ref.rgb, valid, target_yx, z, rel, K, shift)
+    return np.where(ok[:, None], sub, nearest)
+
+
+def _smooth_fill(out_rgb: np.ndarray, hole: np.ndarray, fy: np.ndarray, fx: np.ndarray, method: str) -> None:
+    """Fill pixels (`fy`, `fx`) (M,) of `out_rgb` (H, W, 3) uint8 in place from the colours around them:
+    "telea" (OpenCV's fast marching) or "harmonic" (Laplace's equation with the border fixed)."""
+    if method == "telea":
+        # on the fill's bounding box (+ the inpainting radius): the same result without whole-image passes
+        h, w = hole.shape
+        y0, y1 = max(int(fy.min()) - 4, 0), min(int(fy.max()) + 5, h)
+        x0, x1 = max(int(fx.min()) - 4, 0), min(int(fx.max()) + 5, w)
+        box = np.zeros((y1 - y0, x1 - x0), np.uint8)
+        box[fy - y0, fx - x0] = 1
+        out_rgb[y0:y1, x0:x1] = cv2.inpaint(np.ascontiguousarray(out_rgb[y0:y1, x0:x1]), box, 3, cv2.INPAINT_TELEA)
+        return
+    fill = np.zeros_like(hole)
+    fill[fy, fx] = True
+
+    def colours(rows: slice, cols: slice) -> tuple[np.ndarray, np.ndarray]:
+        patch = out_rgb[rows, cols].astype(np.float32)
+        return patch, np.ones(patch.shape[:2], bool)  # every colour outside `fill` is known
+
+    col = harmonic_fill(fill, colours, (fy, fx))
+    out_rgb[fy, fx] = np.clip(col + 0.5, 0, 255).astype(np.uint8)
+
+
+def _patchmatch_fill(out_rgb: np.ndarray, hole: np.ndarray, pix: _HolePixels, search: np.ndarray,
+                     sources: list[np.ndarray], valid: list[np.ndarray], warps: _Warps, config: PatchMatchConfig,
+                     matches: _Matches) -> np.ndarray:
+    """`out_rgb` (H, W, 3) uint8 with the hole pixels `search` (N,) bool filled by PatchMatch from `sources`
+    (starting from geometry's matches); their matches are recorded in `matches`."""
+    # PatchMatch visits only the pixels it must fill, so its cost scales with them, not the image.
+    pm_hole = np.zeros_like(hole)
+    pm_hole[pix.py[search], pix.px[search]] = True
+    res = patchmatch_fill(out_rgb, pm_hole, np.stack(sources), np.stack(valid), warps.init_src[search],
+                          warps.init_yx[search], config)
+    matches.src[search], matches.yx[search], matches.cost[search] = res.source, res.yx, res.cost
+    return res.rgb
+
+
+def _match_depths(refs: list[ReferenceView], K: np.ndarray, warps: _Warps, matches: _Matches, todo: np.ndarray,
+                  d: np.ndarray) -> None:
+    """Depth in the target (into `d` (N,) float32) of the hole pixels `todo` (N,) bool matched to a reference
+    pixel; those matched to the target itself keep 0."""
+    for s, ref in enumerate(refs):
+        m = todo & (matches.src == s)
         if m.any():
-            d[m] = depth_in_target(ref.depth, yx_all[m], rel[s], K)
-    conf = np.exp(-cost_all / config.max_depth_cost).astype(np.float32)
-    ok = (cost_all <= config.max_depth_cost) & (d > 0) & (geo | config.searched_depth)
+            d[m] = depth_in_target(ref.depth, matches.yx[m], warps.rel[s], K)
+
+
+def _restored_depth(depth: np.ndarray, hole: np.ndarray, pix: _HolePixels, d: np.ndarray, matches: _Matches,
+                    geo: np.ndarray, config: RestorationConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The depth (H, W) float32 m with the hole's depths `d` (N,) where their match is good enough (and from
+    geometry unless `searched_depth`), the rest continued from the border (`unseen_depth`) or left 0; and its
+    confidence (H, W) float32 in [0, 1]. `geo` (N,) bool: pixels geometry matched."""
+    py, px = pix.py, pix.px
+    conf = np.exp(-matches.cost / config.max_depth_cost).astype(np.float32)
+    ok = (matches.cost <= config.max_depth_cost) & (d > 0) & (geo | config.searched_depth)
     out_depth = depth.copy()
     out_depth[py, px] = np.where(ok, d, 0.0)
-    confidence = np.zeros((h, w), np.float32)
+    confidence = np.zeros(hole.shape, np.float32)
     confidence[py, px] = np.where(ok, conf, 0.0)
     if config.unseen_depth == "border" and not ok.all():
         gy, gx = py[~ok], px[~ok]  # row-major, as np.nonzero(guess) gives them
@@ -236,12 +359,7 @@ def restore_frame(rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray, T_WC: np
         z = fill_depth_from_border(out_depth, guess, (gy, gx))
         out_depth[gy, gx] = z
         confidence[gy, gx] = np.where(z > 0, np.float32(config.border_depth_confidence), 0.0)
-    n = max(len(py), 1)
-    from_self = float(np.sum(src_all == self_index)) / n
-    seen = np.zeros_like(hole)
-    seen[py[geo], px[geo]] = True
-    return Restoration(out_rgb, out_depth, confidence, hole, seen, 1.0 - from_self if refs else 0.0, from_self,
-                       refined)
+    return out_depth, confidence
 
 
 @njit(cache=True, nogil=True)
@@ -280,49 +398,3 @@ def _accumulate(acc, z_acc, n_acc, sel, col, gain, z):
             acc[i, c] += col[k, c] * gain[c]
         z_acc[i] += z[k]
         n_acc[i] += 1
-
-
-def _colour_gain(rgb: np.ndarray, hole: np.ndarray, ref_rgb: np.ndarray, landed: np.ndarray,
-                 region: tuple[int, int, int, int], min_pixels: int = 500, max_pixels: int = 20_000) -> np.ndarray:
-    """(3,) target / reference colour ratio over the static target pixels of `region` that the reference's
-    `landed` (h, w, 2) map covers; 1 where too few are shared to say. The median of per-pixel ratios: moving
-    things outside the hole (a mask that missed them) or misregistered edges must not set it. Clipped to a
-    plausible exposure change. Of more than `max_pixels` shared pixels an even subsample is used: a median of
-    20 000 ratios is as good an estimate, and a large hole's region shares 100 000+ (17 ms per reference)."""
-    y0, _, x0, _ = region
-    shared, ratios = _shared_ratios(rgb, hole, ref_rgb, landed, y0, x0, max_pixels)
-    if shared < min_pixels or ratios.shape[1] < min_pixels:
-        return np.ones(3)
-    return np.clip(np.median(ratios, axis=1), 0.7, 1.4)
-
-
-@njit(cache=True)
-def _shared_ratios(rgb, hole, ref_rgb, landed, y0, x0, max_pixels):
-    """(number of shared pixels, (3, m) float64 target / reference ratios of the bright ones among every step-th
-    shared pixel in row-major order): one pass to count, one to sample, no index arrays. Channels as rows, so
-    numpy's median reads them contiguously."""
-    h, w = landed.shape[0], landed.shape[1]
-    n = 0
-    for y in range(h):
-        for x in range(w):
-            if landed[y, x, 0] >= 0 and not hole[y0 + y, x0 + x]:
-                n += 1
-    step = (n + max_pixels - 1) // max_pixels if n > max_pixels else 1
-    out = np.empty((3, (n + step - 1) // step if n else 0))
-    i = m = 0
-    for y in range(h):
-        for x in range(w):
-            if landed[y, x, 0] < 0 or hole[y0 + y, x0 + x]:
-                continue
-            if i % step == 0:
-                ry, rx = landed[y, x, 0], landed[y, x, 1]
-                t0, t1, t2 = rgb[y0 + y, x0 + x, 0], rgb[y0 + y, x0 + x, 1], rgb[y0 + y, x0 + x, 2]
-                r0, r1, r2 = ref_rgb[ry, rx, 0], ref_rgb[ry, rx, 1], ref_rgb[ry, rx, 2]
-                # ratios of dark pixels are mostly noise
-                if min(t0, t1, t2) > 16 and min(r0, r1, r2) > 16:
-                    out[0, m] = np.float64(t0) / np.float64(r0)
-                    out[1, m] = np.float64(t1) / np.float64(r1)
-                    out[2, m] = np.float64(t2) / np.float64(r2)
-                    m += 1
-            i += 1
-    return n, out[:, :m]

@@ -9,6 +9,7 @@ later views, while a point cloud keeps every surface it was ever shown.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -66,20 +67,47 @@ def fuse_tsdf(keyframes: list[KeyFrame], K: np.ndarray, stride: int, voxel: floa
     `max_depth` and at depth edges (`edge_rel`, as in the point map) is not integrated. The truncation band
     is `trunc_voxels` voxels: wide enough to absorb depth noise, narrow enough that thin structures survive.
     """
-    import cv2
-
     kfs = [kf for kf in keyframes if kf.depth_small is not None and kf.rgb_small is not None]
     if not kfs:
-        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
+        return _no_points()
+    box = _keyframes_box(kfs, K, stride, voxel, max_depth, dist, edge_rel, margin=4 * trunc_voxels * voxel)
+    if box is None:
+        return _no_points()
+    K_small = K.astype(np.float64).copy()
+    K_small[:2] /= stride  # pixel (u, v) of the strided copy is (u*stride, v*stride) of the full image
+    volume = _new_volume(box, K_small, kfs[0].depth_small.shape, max_depth,  # type: ignore[union-attr]
+                         trunc_voxels)
+    for kf in kfs:
+        depth, rgb = undistort_small(kf, K_small, dist)
+        # colour as float32 (h,w,3): OpenCV 5's coloured TSDF refuses uint8; the channel order is kept as given
+        volume.integrateColor(_integrable_depth(depth, max_depth, edge_rel), rgb.astype(np.float32),
+                              kf.T_WC.astype(np.float32))
+    return _surface_points(volume)
+
+
+def _no_points() -> tuple[np.ndarray, np.ndarray]:
+    """No surface: points (0,3) float32 and colours (0,3) uint8."""
+    return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
+
+
+def _keyframes_box(kfs: list[KeyFrame], K: np.ndarray, stride: int, voxel: float, max_depth: float,
+                   dist: np.ndarray | None, edge_rel: float, margin: float) -> VolumeBox | None:
+    """The volume's box around every 7th back-projected point of the keyframes (as the point map would fuse
+    them), grown by `margin` metres; None when they have no point."""
     rays = pixel_rays(K, dist, kfs[0].depth_small.shape, stride)  # type: ignore[union-attr]
     sample = np.vstack([backproject_keyframe(kf, K, stride, max_depth, rays, edge_rel)[0][::7] for kf in kfs])
     if len(sample) == 0:
-        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
-    box = volume_box(sample, voxel, margin=4 * trunc_voxels * voxel)
+        return None
+    return volume_box(sample, voxel, margin=margin)
 
-    K_small = K.astype(np.float64).copy()
-    K_small[:2] /= stride  # pixel (u, v) of the strided copy is (u*stride, v*stride) of the full image
-    h, w = kfs[0].depth_small.shape  # type: ignore[union-attr]
+
+def _new_volume(box: VolumeBox, K_small: np.ndarray, shape: tuple[int, int], max_depth: float,
+                trunc_voxels: float) -> Any:
+    """An empty coloured TSDF volume (OpenCV's `cv2.Volume`) over `box`, integrating and raycasting images of
+    `shape` (h, w) with intrinsics `K_small` 3x3 and float depth in metres up to `max_depth`."""
+    import cv2
+
+    h, w = shape
     settings = cv2.VolumeSettings(cv2.VolumeType_ColorTSDF)
     for setter in (settings.setCameraIntegrateIntrinsics, settings.setCameraRaycastIntrinsics):
         setter(K_small)
@@ -95,20 +123,25 @@ def fuse_tsdf(keyframes: list[KeyFrame], K: np.ndarray, stride: int, voxel: floa
     pose = np.eye(4, dtype=np.float32)
     pose[:3, 3] = box.origin
     settings.setVolumePose(pose)
-    volume = cv2.Volume(cv2.VolumeType_ColorTSDF, settings)
+    return cv2.Volume(cv2.VolumeType_ColorTSDF, settings)
 
-    for kf in kfs:
-        depth, rgb = undistort_small(kf, K_small, dist)
-        depth = np.where((depth > 0) & (depth < max_depth), depth, 0).astype(np.float32)
-        depth[:BORDER_PX] = depth[-BORDER_PX:] = 0  # the colour lookup of the outermost pixels falls off the
-        depth[:, :BORDER_PX] = depth[:, -BORDER_PX:] = 0  # image in OpenCV (black voxels): integrate inside only
-        if edge_rel > 0:
-            depth[depth_edges(depth, edge_rel)] = 0
-        # colour as float32 (h,w,3): OpenCV 5's coloured TSDF refuses uint8; the channel order is kept as given
-        volume.integrateColor(depth, rgb.astype(np.float32), kf.T_WC.astype(np.float32))
+
+def _integrable_depth(depth: np.ndarray, max_depth: float, edge_rel: float) -> np.ndarray:
+    """A copy of strided `depth` (h,w) m as float32, 0 (not integrated) beyond `max_depth`, in the outer
+    `BORDER_PX` frame and at depth edges (`edge_rel`; 0 = none)."""
+    depth = np.where((depth > 0) & (depth < max_depth), depth, 0).astype(np.float32)
+    depth[:BORDER_PX] = depth[-BORDER_PX:] = 0  # the colour lookup of the outermost pixels falls off the
+    depth[:, :BORDER_PX] = depth[:, -BORDER_PX:] = 0  # image in OpenCV (black voxels): integrate inside only
+    if edge_rel > 0:
+        depth[depth_edges(depth, edge_rel)] = 0
+    return depth
+
+
+def _surface_points(volume: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The volume's coloured surface points: (M,3) float32 world points and (M,3) uint8 RGB, in a fixed order."""
     points, _normals, colours = volume.fetchPointsNormalsColors()
     if points is None or len(points) == 0:
-        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
+        return _no_points()
     xyz = np.asarray(points, np.float32).reshape(-1, np.asarray(points).shape[-1])[:, :3]
     rgb_out = np.asarray(colours, np.float32).reshape(-1, np.asarray(colours).shape[-1])[:, :3]
     # a surface voxel no colour sample reached (silhouette rims) comes back black (< 1 of 255); a blended real
