@@ -52,6 +52,10 @@ def _dict(value: Any) -> dict[str, Any] | None:
     return dict(value) if isinstance(value, Mapping) else None
 
 
+def _string(value: Any) -> str | None:
+    return value if isinstance(value, str) else None
+
+
 def _strings(value: Any) -> list[str]:
     return [v for v in value if isinstance(v, str)] if isinstance(value, list | tuple) else []
 
@@ -251,7 +255,8 @@ class RunMetrics:
             tracked_fraction=number(d.get("tracked_fraction")), warnings=_strings(d.get("warnings")), stages=stages,
             ate=ErrorStats.from_dict(d.get("ate")), matched_poses=_count(d.get("matched_poses")),
             rpe=RpeMetrics.from_dict(d.get("rpe")),
-            **{k: d[k] if isinstance(d.get(k), str) else None for k in _LABELS},
+            groundtruth_frame=_string(d.get("groundtruth_frame")), ate_against=_string(d.get("ate_against")),
+            ate_corrected_against=_string(d.get("ate_corrected_against")), rpe_against=_string(d.get("rpe_against")),
             ate_corrected=ErrorStats.from_dict(d.get("ate_corrected")),
             rpe_frame=RpeMetrics.from_dict(d.get("rpe_frame")),
             evaluation_error=err if isinstance(err, str) else None, extra=extra,
