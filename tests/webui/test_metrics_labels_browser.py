@@ -51,41 +51,55 @@ def client(settings: Settings) -> Iterator[TestClient]:
         yield c
 
 
-def _bonn_batch(client: TestClient, settings: Settings, tmp_path: Path) -> tuple[str, str]:
+TUM = {**{k: v for k, v in BONN.items() if not k.endswith("_against") and k != "groundtruth_frame"},
+       "groundtruth_frame": "camera", "ate_against": "camera", "ate_corrected_against": "camera",
+       "rpe_against": "camera", "ate_corrected": BONN["ate"]}
+
+
+def _bonn_batch(client: TestClient, settings: Settings, tmp_path: Path, blob: dict = BONN,
+                camera: str = "bonn") -> tuple[str, str]:
     folder = write_sequence(tmp_path / "bonn_like", n=4, camera_json=False)
     archive = tar_gz(folder, tmp_path / "b.tgz", top="bonn_like").read_bytes()
     r = client.post("/api/v1/sequences", files={"file": ("b.tgz", archive, "application/gzip")},
-                    data={"camera": "bonn", "name": "bonn_like"})
+                    data={"camera": camera, "name": "bonn_like"})
     assert r.status_code == 201, r.text
     batch = client.post("/api/v1/batches", json={"sequence_ids": [r.json()["id"]], "presets": ["full"]}).json()
     job_id = batch["jobs"][0]["id"]
     engine = make_engine(settings)
     with make_session_factory(engine)() as s:
         jobs.claim(s, job_id, "w")
-        metrics.save_run_metrics(s, job_id, BONN)
+        metrics.save_run_metrics(s, job_id, blob)
         jobs.finish(s, job_id, JobStatus.SUCCEEDED)
     engine.dispose()
     return job_id, batch["id"]
 
 
-def test_job_and_batch_pages_label_the_figures(playwright_api, client: TestClient,  # noqa: F811
-                                               settings: Settings, tmp_path: Path) -> None:
-    job_id, batch_id = _bonn_batch(client, settings, tmp_path)
-
+def _answer(client: TestClient):
     def answer(route) -> None:
         req = route.request
         url = urlsplit(req.url)
         r = client.request(req.method, url.path + (f"?{url.query}" if url.query else ""),
                            headers={k: v for k, v in req.headers.items() if k.lower() != "host"})
         route.fulfill(status=r.status_code, headers=dict(r.headers), body=r.content)
+    return answer
 
+
+def test_job_and_batch_pages_label_the_figures(playwright_api, client: TestClient,  # noqa: F811
+                                               settings: Settings, tmp_path: Path) -> None:
+    job_id, batch_id = _bonn_batch(client, settings, tmp_path)
+    tum_job, _ = _bonn_batch(client, settings, tmp_path / "tum", TUM, "tum3")
     errors: list[str] = []
     with playwright_api.sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
         try:
             page = browser.new_page()
             page.on("pageerror", lambda e: errors.append(str(e)))
-            page.route("http://vtd.test/**", answer)
+            page.route("http://vtd.test/**", _answer(client))
+            page.goto(f"http://vtd.test/jobs/{tum_job}")  # camera ground truth: one ATE, no note
+            playwright_api.expect(page.locator("#metrics-table")).to_contain_text("per frame), against camera")
+            assert "ATE corrected" not in page.locator("#metrics-table").inner_text()
+            assert page.locator("#metrics-gt-frame").count() == 0
+
             page.goto(f"http://vtd.test/jobs/{job_id}")
             table = page.locator("#metrics-table")
             playwright_api.expect(table).to_contain_text("ATE corrected (m), against " + CORRECTED)
@@ -96,6 +110,7 @@ def test_job_and_batch_pages_label_the_figures(playwright_api, client: TestClien
             assert f"RPE rotation (° per frame), against {CORRECTED}" in text
             assert "0.0164" in text and "0.0117" in text and "0.366" in text
             playwright_api.expect(page.locator("#metrics-gt-frame")).to_contain_text("not of the camera")
+            playwright_api.expect(page.locator("#facts")).to_contain_text("yes, the bonn-marker's pose")
 
             page.goto(f"http://vtd.test/batches/{batch_id}")
             playwright_api.expect(page.locator("#batch-gt-frame")).to_contain_text("bonn_like (bonn-marker)")

@@ -13,7 +13,7 @@
     const m = job.metrics || {};
     const items = [
       ["Sequence", seqInfo ? seqInfo.name : job.sequence_id.slice(0, 8)],
-      ["Ground truth", seqInfo ? (seqInfo.has_groundtruth ? "yes" : "no") : "—"],
+      ["Ground truth", seqInfo ? (!seqInfo.has_groundtruth ? "no" : seqInfo.groundtruth_frame && seqInfo.groundtruth_frame !== "camera" ? `yes, the ${seqInfo.groundtruth_frame}'s pose` : "yes") : "—"],
       ["Preset", job.preset],
       ["Stage", job.status === "running" ? job.stage || "—" : job.status === "queued" ? "waiting" : job.status === "succeeded" ? "finished" : job.status === "cancelled" ? "cancelled" : "stopped"],
       ["Frames", job.frames_total ? `${job.frames_done} of ${job.frames_total}` : "—"],
