@@ -79,6 +79,9 @@ def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, override
         "tracked": m["tracked"], "marked": info.get("potentially_dynamic_fraction"),
         "ate": m.get("ate", {}).get("rmse"), "rpe_t": m.get("rpe", {}).get("trans", {}).get("rmse"),
         "rpe_r": m.get("rpe", {}).get("rot_deg", {}).get("rmse"),
+        "ate_corr": m.get("ate_corrected", {}).get("rmse"),
+        "rpe_ft": m.get("rpe_frame", {}).get("trans", {}).get("rmse"),
+        "rpe_fr": m.get("rpe_frame", {}).get("rot_deg", {}).get("rmse"),
         "kept": info.get("features_kept"), "removed": info.get("features_removed"),
         "restored_feats": info.get("restored_features"),
         "precision": ct.get("feature_precision"), "recall": ct.get("feature_recall"), "iou": ct.get("mask_iou"),
@@ -131,12 +134,13 @@ def main() -> None:
         ap.error(f"--starts takes comma-separated frame indices, not {args.starts!r}")
     if any(k < 0 for k in starts):
         ap.error("--starts must be >= 0")
-    print("| sequence | preset | frames | tracked | marked area | ATE rmse (m) | RPE t (m/s) | RPE r (°/s) "
-          "| static feats/frame | removed/frame | restored feats/frame | dyn. precision | dyn. recall "
+    print("| sequence | preset | frames | tracked | marked area | ATE rmse (m) | ATE corrected (m) | RPE t (m/s) "
+          "| RPE r (°/s) | RPE t (m/frame) | RPE r (°/frame) | static feats/frame | removed/frame "
+          "| restored feats/frame | dyn. precision | dyn. recall "
           "| dyn. missed: culling / segmentation | mask IoU "
           "| restore PSNR (dB) | restore depth err (cm) | seg ms | cull ms (with ORB) | cull decision ms "
           "| guided frames | restore ms | fps |")
-    print("|" + "---|" * 23)
+    print("|" + "---|" * 26)
     rows = []
     for spec in args.sequence:
         seq_dir, _, camera = spec.rpartition(":")
@@ -182,7 +186,8 @@ def teacher_overrides(model: str) -> dict:
 def print_row(r: dict) -> None:
     marked = "–" if r["marked"] is None else f"{100 * r['marked']:.1f} %"
     print(f"| {r['sequence']} | {r['preset']} | {r['frames']} | {r['tracked']} | {marked} | {_fmt(r['ate'], 4)} | "
-          f"{_fmt(r['rpe_t'], 4)} | {_fmt(r['rpe_r'], 2)} | {_fmt(r['kept'], 0)} | {_fmt(r['removed'], 1)} | "
+          f"{_fmt(r['ate_corr'], 4)} | {_fmt(r['rpe_t'], 4)} | {_fmt(r['rpe_r'], 2)} | {_fmt(r['rpe_ft'], 4)} | "
+          f"{_fmt(r['rpe_fr'], 3)} | {_fmt(r['kept'], 0)} | {_fmt(r['removed'], 1)} | "
           f"{_fmt(r['restored_feats'], 1)} | {_fmt(r['precision'], 2)} | {_fmt(r['recall'], 2)} | "
           f"{_missed(r)} | {_fmt(r['iou'], 2)} | {_fmt(r['psnr'], 1)} | {_fmt(r['depth_err'], 1, 100)} | "
           f"{_fmt(r['seg_ms'], 1)} | {_fmt(r['cull_ms'], 1)} | {_fmt(r['decision_ms'], 1)} | {r['guided']} | "

@@ -65,4 +65,12 @@ def run_command(
                f"relocalisations {m['relocalisations']}  keyframes {m['keyframes']}  fps {m['fps']}")
     if "ate" in m:
         typer.echo(f"ATE rmse {m['ate']['rmse']:.4f} m  (matched {m['matched_poses']})")
+        if m.get("groundtruth_frame", "camera") != "camera" and "ate_corrected" in m:
+            typer.echo(f"  against {m.get('ate_against')}; {m['ate_corrected']['rmse']:.4f} m against "
+                       f"{m.get('ate_corrected_against')}")
+    for key, per in (("rpe", "s"), ("rpe_frame", "frame")):
+        if isinstance(m.get(key), dict):
+            r = m[key]
+            typer.echo(f"RPE rmse {r['trans']['rmse']:.4f} m  {r['rot_deg']['rmse']:.3f} deg per {per}"
+                       f"  (against {m.get('rpe_against', 'the ground truth')})")
     typer.echo(f"outputs in {out}")

@@ -2,9 +2,11 @@
 (``vtdslam run --camera '{...}'``, a sequence's ``camera.json``).
 
 A spec is a JSON object ``{"fx", "fy", "cx", "cy", "depth_scale"?, "width"?, "height"?, "dist"?, "name"?,
-"depth_registered"?}``: focal lengths and principal point in pixels, ``depth_scale`` depth units per metre,
-``dist`` OpenCV's k1 k2 p1 p2 [k3]. :func:`check_intrinsics` raises :class:`formats.errors.SpecError`, which
-the api answers as 422 and the worker as CameraError.
+"depth_registered"?, "groundtruth_frame"?}``: focal lengths and principal point in pixels, ``depth_scale``
+depth units per metre, ``dist`` OpenCV's k1 k2 p1 p2 [k3], ``groundtruth_frame`` what the sequence's ground
+truth is the pose of (a name of ``formats.catalog.GROUNDTRUTH_FRAMES``: ``camera``, the default, or
+``bonn-marker``). :func:`check_intrinsics` raises :class:`formats.errors.SpecError`, which the api answers as
+422 and the worker as CameraError.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from formats.catalog import CAMERA_PRESETS, DEFAULT_GROUNDTRUTH_FRAME, GROUNDTRUTH_FRAMES
 from formats.errors import SpecError
 
 FOCAL_PX = (50.0, 5000.0)
@@ -24,7 +27,8 @@ MAX_DIST = 10.0
 DEFAULT_SIZE = (640, 480)
 """The image size intrinsics refer to when they give none (every camera preset's)."""
 CAMERA_NUMBERS = ("fx", "fy", "cx", "cy", "depth_scale")
-CAMERA_FIELDS = frozenset({*CAMERA_NUMBERS, "width", "height", "dist", "name", "depth_registered"})
+CAMERA_FIELDS = frozenset({*CAMERA_NUMBERS, "width", "height", "dist", "name", "depth_registered",
+                           "groundtruth_frame"})
 
 
 def check_intrinsics(d: Mapping[str, Any]) -> dict[str, Any]:
@@ -63,10 +67,26 @@ def check_intrinsics(d: Mapping[str, Any]) -> dict[str, Any]:
             raise SpecError("camera depth_registered must be true or false",
                             {"depth_registered": str(d["depth_registered"])[:64]})
         out["depth_registered"] = d["depth_registered"]
+    if "groundtruth_frame" in d:
+        frame = d["groundtruth_frame"]
+        if frame not in GROUNDTRUTH_FRAMES:
+            raise SpecError(f"camera groundtruth_frame must be one of {', '.join(GROUNDTRUTH_FRAMES)}",
+                            {"groundtruth_frame": str(frame)[:64], "allowed": list(GROUNDTRUTH_FRAMES)})
+        out["groundtruth_frame"] = frame
     _check_plausible(out)
     if "name" in d:
         out["name"] = str(d["name"])[:64]
     return out
+
+
+def groundtruth_frame_of(spec: Mapping[str, Any] | None) -> str:
+    """What a stored camera spec (``{"preset": name}`` or explicit intrinsics) says its sequence's ground truth
+    is the pose of; ``camera`` when it says nothing (a sequence's own camera.json wins in the worker)."""
+    if not isinstance(spec, Mapping):
+        return DEFAULT_GROUNDTRUTH_FRAME
+    preset = CAMERA_PRESETS.get(spec["preset"]) if isinstance(spec.get("preset"), str) else None
+    frame = preset.groundtruth_frame if preset is not None else spec.get("groundtruth_frame")
+    return frame if isinstance(frame, str) and frame in GROUNDTRUTH_FRAMES else DEFAULT_GROUNDTRUTH_FRAME
 
 
 def _check_plausible(cam: dict[str, Any]) -> None:

@@ -123,6 +123,19 @@ class CameraPreset:
     depth_registered: bool = True
     """Depth pixels are registered to the colour pixels (the driver reprojected them: TUM, Bonn); False when the
     dataset ships the depth camera's own images (7-Scenes)."""
+    groundtruth_frame: str = "camera"
+    """What the dataset's ``groundtruth.txt`` is the pose of: a name of :data:`GROUNDTRUTH_FRAMES`."""
+
+
+GROUNDTRUTH_FRAMES: dict[str, str] = {
+    "camera": "the camera's pose T_WC (TUM RGB-D, 7-Scenes, synthetic sequences)",
+    "bonn-marker": "Bonn RGB-D Dynamic's motion-capture marker; the camera is T_ROS · T_gt · T_ROS · T_m "
+                   "(the dataset's documented offset)",
+}
+"""What a sequence's ground truth can be the pose of, by name. RPE is always scored against the camera's ground
+truth (a marker's corrected to it); ATE is reported against the raw ground truth (the published convention) and
+against the camera's."""
+DEFAULT_GROUNDTRUTH_FRAME = "camera"
 
 
 CAMERA_PRESETS: dict[str, CameraPreset] = {
@@ -131,8 +144,9 @@ CAMERA_PRESETS: dict[str, CameraPreset] = {
     "tum2": CameraPreset(520.9, 521.0, 325.1, 249.7, 5000.0, dist=(0.2312, -0.7849, -0.0033, -0.0001, 0.9172)),
     "tum3": CameraPreset(535.4, 539.2, 320.1, 247.6, 5000.0),
     # Bonn RGB-D Dynamic (its documented intrinsics; k3 not given).
+    # Its ground truth is a motion-capture marker's pose, not the camera's.
     "bonn": CameraPreset(542.822841, 542.576870, 315.593520, 237.756098, 5000.0,
-                         dist=(0.039903, -0.099343, -0.000730, -0.000144, 0.0)),
+                         dist=(0.039903, -0.099343, -0.000730, -0.000144, 0.0), groundtruth_frame="bonn-marker"),
     # Microsoft 7-Scenes nominal depth intrinsics; depth in millimetres, from the Kinect's depth camera and not
     # registered to colour (the dataset says so): a keypoint's depth may be a neighbouring surface's.
     "7scenes": CameraPreset(585.0, 585.0, 320.0, 240.0, 1000.0, depth_registered=False),

@@ -52,6 +52,10 @@ def _dict(value: Any) -> dict[str, Any] | None:
     return dict(value) if isinstance(value, Mapping) else None
 
 
+def _string(value: Any) -> str | None:
+    return value if isinstance(value, str) else None
+
+
 def _strings(value: Any) -> list[str]:
     return [v for v in value if isinstance(v, str)] if isinstance(value, list | tuple) else []
 
@@ -83,9 +87,11 @@ class RpeMetrics:
     """TUM's relative pose error (worker.slam.evaluation.rpe)."""
 
     mode: str | None = None
-    """``fixed-delta`` or ``all-pairs``."""
+    """``fixed-delta``, ``fixed-frames`` or ``all-pairs``."""
     delta_s: Number | None = None
     """Seconds between the two poses of a pair (fixed-delta mode)."""
+    delta_frames: int | None = None
+    """Poses between the two poses of a pair (fixed-frames mode: 1 = consecutive poses)."""
     max_pairs: int | None = None
     """The sampling bound asked for; 0 = every pair."""
     pairs: int | None = None
@@ -107,12 +113,16 @@ class RpeMetrics:
             return got if d.get(flat) is None else replace(got, rmse=number(d[flat]))
 
         mode = d.get("mode")
-        return cls(mode if isinstance(mode, str) else None, number(d.get("delta_s")), _count(d.get("max_pairs")),
-                   _count(d.get("pairs")), stats("trans_rmse", "trans"), stats("rot_rmse", "rot_deg", "rot"))
+        return cls(mode if isinstance(mode, str) else None, number(d.get("delta_s")), _count(d.get("delta_frames")),
+                   _count(d.get("max_pairs")), _count(d.get("pairs")), stats("trans_rmse", "trans"),
+                   stats("rot_rmse", "rot_deg", "rot"))
 
     def to_dict(self) -> dict[str, Any]:
-        return {"mode": self.mode, "delta_s": self.delta_s, "max_pairs": self.max_pairs, "pairs": self.pairs,
-                "trans": self.trans.to_dict(), "rot_deg": self.rot_deg.to_dict()}
+        out = {"mode": self.mode, "delta_s": self.delta_s, "max_pairs": self.max_pairs, "pairs": self.pairs,
+               "trans": self.trans.to_dict(), "rot_deg": self.rot_deg.to_dict()}
+        if self.delta_frames is not None:
+            out["delta_frames"] = self.delta_frames
+        return out
 
 
 @dataclass(frozen=True)
@@ -135,14 +145,16 @@ _COUNTS = ("frames", "tracked", "lost", "relocalisations", "new_maps", "map_merg
            "loops", "loops_applied")
 _CORE = (*_COUNTS, "fps", "tracking_fps", "tracking_cpu_ms", "timings_ms", "overlapped_stages", "dense_points",
          "stage_info", "peak_rss_mb", "camera", "preset", "start", "tracked_fraction", "warnings")
-_EVALUATION = ("ate", "matched_poses", "rpe", "evaluation_error")
+_LABELS = ("groundtruth_frame", "ate_against", "ate_corrected_against", "rpe_against")
+_EVALUATION = ("ate", "matched_poses", "rpe", *_LABELS, "ate_corrected", "rpe_frame", "evaluation_error")
 
 
 @dataclass
 class RunMetrics:
     """A run's ``metrics.json``. Key order on disk: the counters and figures below (always written, null where
-    unknown), the stages' summaries (:attr:`stages`), then the evaluation (``ate``, ``matched_poses``, ``rpe``
-    when there is ground truth, or ``evaluation_error``), then keys this schema does not know (:attr:`extra`)."""
+    unknown), the stages' summaries (:attr:`stages`), then the evaluation (``ate``, ``matched_poses``, ``rpe``,
+    ``groundtruth_frame``, the ``*_against`` labels, ``ate_corrected``, ``rpe_frame`` when there is ground truth,
+    or ``evaluation_error``), then keys this schema does not know (:attr:`extra`)."""
 
     frames: int | None = None
     """Frames processed."""
@@ -196,11 +208,28 @@ class RunMetrics:
     """Each stage's summary by stage name (``culling``, ``restoration``), a stage's own shape; with truth a
     ``truth`` entry (see :meth:`truth_scores`)."""
     ate: ErrorStats | None = None
-    """Absolute trajectory error after SE(3) alignment, metres; None without ground truth."""
+    """Absolute trajectory error after SE(3) alignment, metres, against the raw ground truth (the published
+    convention: for Bonn the marker's poses, see :attr:`ate_against`); None without ground truth."""
     matched_poses: int | None = None
     """Poses associated with ground truth for the ATE."""
     rpe: RpeMetrics | None = None
-    """None without ground truth or on too short a run."""
+    """Drift per second (``delta_s``) against the camera's ground truth (a marker's corrected to it, see
+    :attr:`rpe_against`); None without ground truth or on too short a run. Runs made before the ground-truth
+    frame existed scored it against the raw ground truth (:attr:`rpe_against` absent)."""
+    groundtruth_frame: str | None = None
+    """What the sequence's ground truth is the pose of (``formats.catalog.GROUNDTRUTH_FRAMES``: ``camera`` or
+    ``bonn-marker``); None in runs made before it was recorded."""
+    ate_against: str | None = None
+    """What :attr:`ate` was measured against (``camera``, or e.g. ``bonn-marker (raw ground truth, published
+    convention)``)."""
+    ate_corrected: ErrorStats | None = None
+    """ATE against the camera's ground truth, metres (equal to :attr:`ate` when the ground truth is the camera's)."""
+    ate_corrected_against: str | None = None
+    """What :attr:`ate_corrected` was measured against (``camera``, ``camera (corrected from bonn-marker)``)."""
+    rpe_against: str | None = None
+    """What :attr:`rpe` and :attr:`rpe_frame` were measured against."""
+    rpe_frame: RpeMetrics | None = None
+    """Drift per frame: RPE over consecutive estimate poses (``delta_frames`` 1), against the camera's truth."""
     evaluation_error: str | None = None
     """Why ATE and RPE are absent although the sequence has ground truth."""
     extra: dict[str, Any] = field(default_factory=dict)
@@ -225,8 +254,12 @@ class RunMetrics:
             preset=preset if isinstance(preset, str) else None, start=_count(d.get("start")),
             tracked_fraction=number(d.get("tracked_fraction")), warnings=_strings(d.get("warnings")), stages=stages,
             ate=ErrorStats.from_dict(d.get("ate")), matched_poses=_count(d.get("matched_poses")),
-            rpe=RpeMetrics.from_dict(d.get("rpe")), evaluation_error=err if isinstance(err, str) else None,
-            extra=extra,
+            rpe=RpeMetrics.from_dict(d.get("rpe")),
+            groundtruth_frame=_string(d.get("groundtruth_frame")), ate_against=_string(d.get("ate_against")),
+            ate_corrected_against=_string(d.get("ate_corrected_against")), rpe_against=_string(d.get("rpe_against")),
+            ate_corrected=ErrorStats.from_dict(d.get("ate_corrected")),
+            rpe_frame=RpeMetrics.from_dict(d.get("rpe_frame")),
+            evaluation_error=err if isinstance(err, str) else None, extra=extra,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -239,6 +272,13 @@ class RunMetrics:
             out["matched_poses"] = self.matched_poses
         if self.rpe is not None:
             out["rpe"] = self.rpe.to_dict()
+        for key in _LABELS:
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
+        if self.ate_corrected is not None:
+            out["ate_corrected"] = self.ate_corrected.to_dict()
+        if self.rpe_frame is not None:
+            out["rpe_frame"] = self.rpe_frame.to_dict()
         if self.evaluation_error is not None:
             out["evaluation_error"] = self.evaluation_error
         out.update(self.extra)

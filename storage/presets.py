@@ -51,7 +51,8 @@ def parse_camera_spec(spec: str | dict[str, Any]) -> dict[str, Any]:
 
     Returns what ``Sequence.camera`` stores and the worker turns into its camera: ``{"preset": name}``
     or the intrinsics ``{"fx", "fy", "cx", "cy", "depth_scale"?, "width"?, "height"?, "dist"?, "name"?,
-    "depth_registered"?}``.
+    "depth_registered"?, "groundtruth_frame"?}`` (``camera`` or ``bonn-marker``: what the ground truth is the pose
+    of; the ``bonn`` preset says ``bonn-marker`` itself).
     """
     if isinstance(spec, str):
         text = spec.strip()

@@ -9,6 +9,7 @@ from fastapi import Path
 from pydantic import BaseModel, ConfigDict, Field
 
 from formats import artifacts
+from formats.camera_spec import groundtruth_frame_of
 from formats.run_metrics import with_current_spelling
 from storage.models import Batch, Job, JobStatus, Sequence
 from storage.presets import DEFAULT_PIPELINE_PRESET
@@ -56,6 +57,10 @@ class SequenceOut(BaseModel):
     frames: int
     duration_s: float
     has_groundtruth: bool
+    groundtruth_frame: str = Field(
+        "camera", description="what groundtruth.txt is the pose of: camera, or bonn-marker (Bonn's motion-capture "
+        "marker: RPE and the corrected ATE use it moved to the camera); set by the camera (preset bonn, or "
+        "groundtruth_frame in explicit intrinsics or the folder's camera.json)")
     camera: dict[str, Any]
     size_bytes: int
     created_at: datetime
@@ -73,6 +78,7 @@ class SequenceOut(BaseModel):
                     "frames": 827,
                     "duration_s": 28.83,
                     "has_groundtruth": True,
+                    "groundtruth_frame": "camera",
                     "camera": {"preset": "tum3"},
                     "size_bytes": 512000000,
                     "created_at": "2026-01-01T12:00:00Z",
@@ -93,6 +99,7 @@ class SequenceOut(BaseModel):
             frames=seq.frames,
             duration_s=seq.duration_s,
             has_groundtruth=seq.has_groundtruth,
+            groundtruth_frame=groundtruth_frame_of((seq.meta or {}).get("camera_file") or seq.camera),
             camera=seq.camera,
             size_bytes=seq.size_bytes,
             created_at=seq.created_at,
@@ -303,6 +310,14 @@ class TableRow(BaseModel):
     feature_precision: float | None = Field(description="removed features that were on true movers")
     feature_recall: float | None = Field(description="features on true movers that were removed")
     restoration_psnr: float | None = Field(description="dB, restored against the true background")
+    groundtruth_frame: str | None = Field(
+        None, description="what the ground truth is the pose of: camera, or bonn-marker (Bonn's motion-capture marker)")
+    ate_against: str | None = Field(None, description="what ate_rmse was measured against (raw ground truth)")
+    ate_corrected_rmse: float | None = Field(None, description="metres, ATE against the camera's ground truth")
+    ate_corrected_against: str | None = Field(None, description="what ate_corrected_rmse was measured against")
+    rpe_against: str | None = Field(None, description="what the RPE figures were measured against")
+    rpe_frame_trans_rmse: float | None = Field(None, description="metres per frame (consecutive poses)")
+    rpe_frame_rot_rmse: float | None = Field(None, description="degrees per frame (consecutive poses)")
 
     @classmethod
     def of(cls, row: ComparisonRow) -> TableRow:

@@ -10,6 +10,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from formats.run_metrics import RunMetrics as RunMetricsSchema
+from formats.run_metrics import finite
 from storage.errors import InvalidInput, NotFound
 from storage.models import Batch, Job, RunMetrics, Sequence, new_id
 from storage.repositories import jobs as job_repo
@@ -40,6 +41,19 @@ class ComparisonRow:
     feature_recall: float | None = None
     restoration_psnr: float | None = None
     """dB."""
+    groundtruth_frame: str | None = None
+    """What the sequence's ground truth is the pose of (``camera``, ``bonn-marker``); None for older runs."""
+    ate_against: str | None = None
+    """What ``ate_rmse`` was measured against (the raw ground truth: the published convention)."""
+    ate_corrected_rmse: float | None = None
+    """Metres, against the camera's ground truth (a marker's corrected to the camera)."""
+    ate_corrected_against: str | None = None
+    rpe_against: str | None = None
+    """What the RPE columns were measured against (always the camera's ground truth in current runs)."""
+    rpe_frame_trans_rmse: float | None = None
+    """Metres per frame (consecutive poses)."""
+    rpe_frame_rot_rmse: float | None = None
+    """Degrees per frame."""
 
     def as_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -162,6 +176,20 @@ def comparison(session: Session, batch_id: str) -> list[ComparisonRow]:
                     fps=r.fps if r else None,
                     relocalisations=run.relocalisations,
                     **dataclasses.asdict(run.truth_scores()),
+                    **_groundtruth_columns(run),
                 )
             )
     return rows
+
+
+def _groundtruth_columns(run: RunMetricsSchema) -> dict[str, Any]:
+    """The ground-truth frame, the labels and the figures ``metrics.json`` adds next to ``ate`` and ``rpe``."""
+    return {
+        "groundtruth_frame": run.groundtruth_frame,
+        "ate_against": run.ate_against,
+        "ate_corrected_rmse": finite(run.ate_corrected.rmse) if run.ate_corrected is not None else None,
+        "ate_corrected_against": run.ate_corrected_against,
+        "rpe_against": run.rpe_against,
+        "rpe_frame_trans_rmse": finite(run.rpe_frame.trans.rmse) if run.rpe_frame is not None else None,
+        "rpe_frame_rot_rmse": finite(run.rpe_frame.rot_deg.rmse) if run.rpe_frame is not None else None,
+    }

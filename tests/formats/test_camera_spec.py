@@ -56,3 +56,18 @@ def test_worker_camera_matches_what_the_api_stores() -> None:
     cam = Camera.from_dict(stored)
     assert cam.dist == (0.1, 0.0, 0.0, 0.0, 0.0) and not cam.depth_registered and cam.fx == 500.0
     assert Camera.from_dict(cam.to_dict()) == cam
+
+
+def test_groundtruth_frame() -> None:
+    from formats.camera_spec import groundtruth_frame_of
+
+    assert check_intrinsics({**GOOD, "groundtruth_frame": "bonn-marker"})["groundtruth_frame"] == "bonn-marker"
+    with pytest.raises(SpecError, match="groundtruth_frame"):
+        check_intrinsics({**GOOD, "groundtruth_frame": "tripod"})
+    assert parse_camera({**GOOD, "groundtruth_frame": "bonn-marker"}).groundtruth_frame == "bonn-marker"
+    assert parse_camera(dict(GOOD)).groundtruth_frame == "camera"
+    assert parse_camera_spec(json.dumps({**GOOD, "groundtruth_frame": "bonn-marker"}))["groundtruth_frame"] \
+        == "bonn-marker"
+    assert groundtruth_frame_of({"preset": "bonn"}) == "bonn-marker"
+    assert groundtruth_frame_of({"preset": "tum3"}) == groundtruth_frame_of(None) == "camera"
+    assert groundtruth_frame_of({**GOOD, "groundtruth_frame": "bonn-marker"}) == "bonn-marker"

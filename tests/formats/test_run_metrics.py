@@ -78,3 +78,21 @@ def test_current_spelling_extends_old_rpe_and_leaves_current_blobs_alone():
     assert got["rpe"]["rot"] == {"rmse": 0.3} and got["rpe"]["trans"] == {"rmse": 0.011}  # nothing renamed
     assert got["rpe"]["rot_deg"]["rmse"] == 0.3 and old["rpe"].keys() == {"trans", "rot"}  # the input is untouched
     assert with_current_spelling({"rpe": {"trans_rmse": 1}})["rpe"]["trans"]["rmse"] == 1
+
+
+def test_groundtruth_frame_keys_round_trip_in_the_pipelines_order():
+    """A Bonn run: `ate` in the published convention, `ate_corrected`, `rpe`/`rpe_frame` against the camera."""
+    corrected = "camera (corrected from bonn-marker)"
+    blob = {**PIPELINE, "groundtruth_frame": "bonn-marker",
+            "ate_against": "bonn-marker (raw ground truth, published convention)",
+            "ate_corrected_against": corrected, "rpe_against": corrected, "ate_corrected": {**STATS, "rmse": 0.031},
+            "rpe_frame": {"mode": "fixed-frames", "delta_s": None, "max_pairs": 0, "pairs": 27, "trans": STATS,
+                          "rot_deg": STATS, "delta_frames": 1}}
+    m = RunMetrics.from_dict(blob)
+    assert format_run_metrics(m) == json.dumps(blob, indent=2)
+    assert m.stages.keys() == {"culling", "restoration"} and not m.extra
+    assert m.groundtruth_frame == "bonn-marker" and m.rpe_against == corrected
+    assert m.ate_corrected is not None and m.ate_corrected.rmse == 0.031
+    assert m.rpe_frame is not None and m.rpe_frame.delta_frames == 1 and m.rpe_frame.mode == "fixed-frames"
+    old = RunMetrics.from_dict(PIPELINE)  # a run made before the frame was recorded
+    assert old.groundtruth_frame is None and old.ate_corrected is None and old.rpe_frame is None

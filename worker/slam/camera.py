@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.camera_spec import check_intrinsics
-from formats.catalog import CAMERA_PRESETS
+from formats.catalog import CAMERA_PRESETS, GROUNDTRUTH_FRAMES
 from formats.errors import SpecError
 from worker.slam.errors import CameraError
 
@@ -34,6 +34,9 @@ class Camera:
     """Depth pixels lie on the colour pixels that see the same point (the driver registered them, as for TUM,
     Bonn and most RGB-D cameras); False for raw depth-camera images (7-Scenes). Sets how much keypoint depth
     weighs in pose optimisation (`tracking.virtual_baseline_m` / `unregistered_baseline_m`)."""
+    groundtruth_frame: str = "camera"
+    """What the sequence's ground truth is the pose of (`formats.catalog.GROUNDTRUTH_FRAMES`: `camera`, or
+    `bonn-marker` for Bonn RGB-D Dynamic, corrected to the camera for RPE and the corrected ATE)."""
 
     def __post_init__(self) -> None:
         vals = (self.fx, self.fy, self.cx, self.cy, self.depth_scale)
@@ -45,6 +48,9 @@ class Camera:
             raise CameraError(f"dist needs 5 coefficients (k1 k2 p1 p2 k3), got {len(self.dist)}")
         if not isinstance(self.depth_registered, bool):
             raise CameraError(f"depth_registered must be true or false, got {self.depth_registered!r}")
+        if self.groundtruth_frame not in GROUNDTRUTH_FRAMES:
+            raise CameraError(f"groundtruth_frame must be one of {sorted(GROUNDTRUTH_FRAMES)}, "
+                              f"got {self.groundtruth_frame!r}")
 
     @property
     def K(self) -> np.ndarray:

@@ -10,6 +10,7 @@ from storage.db import make_engine, make_session_factory
 from storage.models import JobStatus
 from storage.repositories import jobs, metrics
 from tests.backend.api.conftest import upload
+from tests.backend.api.data import tar_gz, write_sequence
 
 
 @pytest.fixture
@@ -94,3 +95,49 @@ def test_named_batch_and_truth_scores_in_the_table(client, settings, seqs):
             table["orb-only"]["relocalisations"]) == (None, None, 0)
     rows = list(csv.DictReader(io.StringIO(client.get(f"/api/v1/batches/{batch['id']}/table?format=csv").text)))
     assert rows[0]["restoration_psnr"] == "24.5" and rows[1]["mask_iou"] == ""
+
+
+def test_marker_ground_truth_is_labelled_in_the_table_and_csv(client, settings, seqs):
+    """A Bonn run: ATE in the published convention and corrected, RPE per second and per frame against the
+    camera's ground truth, each with what it was measured against."""
+    batch = client.post("/api/v1/batches", json={"sequence_ids": seqs[:1], "presets": ["full"]}).json()
+    job_id = batch["jobs"][0]["id"]
+    corrected = "camera (corrected from bonn-marker)"
+    blob = {"ate": {"rmse": 0.016}, "rpe": {"mode": "fixed-delta", "delta_s": 1.0, "trans": {"rmse": 0.0207},
+                                             "rot_deg": {"rmse": 0.59}},
+            "groundtruth_frame": "bonn-marker", "ate_against": "bonn-marker (raw ground truth, published convention)",
+            "ate_corrected_against": corrected, "rpe_against": corrected, "ate_corrected": {"rmse": 0.0164},
+            "rpe_frame": {"mode": "fixed-frames", "delta_frames": 1, "trans": {"rmse": 0.0117},
+                          "rot_deg": {"rmse": 0.366}}}
+    engine = make_engine(settings)
+    with make_session_factory(engine)() as s:
+        jobs.claim(s, job_id, "w")
+        metrics.save_run_metrics(s, job_id, blob)
+        jobs.finish(s, job_id, JobStatus.SUCCEEDED)
+    engine.dispose()
+    row = client.get(f"/api/v1/batches/{batch['id']}/table").json()[0]
+    assert (row["ate_rmse"], row["ate_corrected_rmse"], row["rpe_trans_rmse"], row["rpe_frame_trans_rmse"],
+            row["rpe_frame_rot_rmse"]) == (0.016, 0.0164, 0.0207, 0.0117, 0.366)
+    assert row["groundtruth_frame"] == "bonn-marker" and row["rpe_against"] == corrected
+    assert "published convention" in row["ate_against"] and row["ate_corrected_against"] == corrected
+    csv_row = next(csv.DictReader(io.StringIO(client.get(f"/api/v1/batches/{batch['id']}/table?format=csv").text)))
+    assert csv_row["ate_corrected_rmse"] == "0.0164" and csv_row["rpe_against"] == corrected
+    assert csv_row["rpe_frame_rot_rmse"] == "0.366" and csv_row["groundtruth_frame"] == "bonn-marker"
+    job = client.get(f"/api/v1/jobs/{job_id}").json()  # the api hands the labelled blob on as it is
+    assert job["metrics"]["rpe_against"] == corrected and job["metrics"]["ate_corrected"]["rmse"] == 0.0164
+
+
+def test_sequences_say_what_their_ground_truth_is_the_pose_of(client, seq_tgz, tmp_path):
+    """The camera says it: the bonn preset, explicit intrinsics, or the folder's camera.json (which wins)."""
+    plain = tar_gz(write_sequence(tmp_path / "bonn_like", n=6, camera_json=False), tmp_path / "b.tgz",
+                   top="bonn_like").read_bytes()
+    bonn = upload(client, plain, camera="bonn", allow_duplicate=True).json()
+    tum = upload(client, plain, camera="tum3", allow_duplicate=True).json()
+    explicit = upload(client, plain, allow_duplicate=True, camera='{"fx": 542.8, "fy": 542.6, "cx": 315.6, '
+                      '"cy": 237.8, "groundtruth_frame": "bonn-marker"}').json()
+    own_file = upload(client, seq_tgz, camera="bonn", allow_duplicate=True).json()  # its camera.json says camera
+    assert (bonn["groundtruth_frame"], tum["groundtruth_frame"], explicit["groundtruth_frame"],
+            own_file["groundtruth_frame"]) == ("bonn-marker", "camera", "bonn-marker", "camera")
+    bad = upload(client, plain, allow_duplicate=True, camera='{"fx": 542.8, "fy": 542.6, "cx": 315.6, '
+                 '"cy": 237.8, "groundtruth_frame": "tripod"}')
+    assert bad.status_code == 422 and "groundtruth_frame" in bad.json()["error"]["message"]

@@ -83,6 +83,14 @@ def test_comparison_rows(session: Session, two: list[Sequence]) -> None:
         "feature_precision": None,
         "feature_recall": None,
         "restoration_psnr": None,
+        # a run made before the ground-truth frame was recorded: no frame, labels or per-frame RPE
+        "groundtruth_frame": None,
+        "ate_against": None,
+        "ate_corrected_rmse": None,
+        "ate_corrected_against": None,
+        "rpe_against": None,
+        "rpe_frame_trans_rmse": None,
+        "rpe_frame_rot_rmse": None,
     }
     assert (rows[2].status, rows[2].ate_rmse) == ("failed", None)
     assert {r.status for r in rows[3:]} == {JobStatus.QUEUED.value}

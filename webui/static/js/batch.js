@@ -6,6 +6,7 @@
   const main = $("main"), batchId = main.dataset.batchId, baseline = main.dataset.baseline;
   const LOWER_IS_BETTER = {
     ate_rmse: true, rpe_trans_rmse: true, rpe_rot_rmse: true, fps: false, relocalisations: true,
+    ate_corrected_rmse: true, rpe_frame_trans_rmse: true, rpe_frame_rot_rmse: true,
     mask_iou: false, feature_precision: false, feature_recall: false, restoration_psnr: false,
   };
   const pct = (x) => (isNum(x) ? (100 * x).toFixed(1) + " %" : "—");
@@ -13,6 +14,7 @@
     ate_rmse: (x) => num(x, 4), rpe_trans_rmse: (x) => num(x, 4), rpe_rot_rmse: (x) => num(x, 3), fps: (x) => num(x, 2),
     relocalisations: (x) => num(x, 0), mask_iou: (x) => num(x, 3), feature_precision: pct, feature_recall: pct,
     restoration_psnr: (x) => num(x, 1),
+    ate_corrected_rmse: (x) => num(x, 4), rpe_frame_trans_rmse: (x) => num(x, 4), rpe_frame_rot_rmse: (x) => num(x, 3),
   };
   const TRUTH = [["mask_iou", "Mask IoU"], ["feature_precision", "Dyn. feature precision"],
     ["feature_recall", "Dyn. feature recall"], ["restoration_psnr", "Restoration PSNR (dB)"], ["relocalisations", "Relocalisations"]];
@@ -57,6 +59,14 @@
     }
     if (!rows.size) body.append(el("tr", {}, el("td", { colspan: presets.length + 1, class: "muted" }, "No results yet.")));
     $("compare").replaceChildren(head, body);
+    // Sequences whose ground truth is a marker's pose (Bonn): say what each figure was measured against.
+    const marked = [...new Set(table.filter((r) => r.groundtruth_frame && r.groundtruth_frame !== "camera")
+      .map((r) => `${r.sequence_name || r.sequence_id.slice(0, 8)} (${r.groundtruth_frame})`))];
+    $("batch-gt-frame")?.remove();
+    if (marked.length) $("compare").parentNode.after(el("p", { id: "batch-gt-frame", class: "muted small" },
+      `Ground truth that is not the camera's pose: ${marked.join(", ")}. Its "ATE RMSE" is against that raw ground `
+      + "truth (the published convention), \"ATE corrected\" and every RPE against the camera's ground truth "
+      + "corrected from it."));
     $("batch-note").hidden = !presets.includes(baseline) && presets.length < 2;
   }
 

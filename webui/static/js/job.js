@@ -13,7 +13,7 @@
     const m = job.metrics || {};
     const items = [
       ["Sequence", seqInfo ? seqInfo.name : job.sequence_id.slice(0, 8)],
-      ["Ground truth", seqInfo ? (seqInfo.has_groundtruth ? "yes" : "no") : "—"],
+      ["Ground truth", seqInfo ? (!seqInfo.has_groundtruth ? "no" : seqInfo.groundtruth_frame && seqInfo.groundtruth_frame !== "camera" ? `yes, the ${seqInfo.groundtruth_frame}'s pose` : "yes") : "—"],
       ["Preset", job.preset],
       ["Stage", job.status === "running" ? job.stage || "—" : job.status === "queued" ? "waiting" : job.status === "succeeded" ? "finished" : job.status === "cancelled" ? "cancelled" : "stopped"],
       ["Frames", job.frames_total ? `${job.frames_done} of ${job.frames_total}` : "—"],
@@ -62,10 +62,19 @@
       if (!o || typeof o !== "object") return;
       rows.push([label, ...["rmse", "mean", "median", "std", "max"].map((k) => fmt(o[k]))]);
     };
-    stats("ATE, absolute trajectory error (m)", m.ate, (x) => num(x, 4));
+    // What each figure was measured against (metrics.json's labels; runs made before them say nothing).
+    const against = (label) => (typeof label === "string" ? `, against ${label}` : "");
+    const marker = typeof m.groundtruth_frame === "string" && m.groundtruth_frame !== "camera";
+    stats(`ATE, absolute trajectory error (m)${against(m.ate_against)}`, m.ate, (x) => num(x, 4));
+    if (marker) stats(`ATE corrected (m)${against(m.ate_corrected_against)}`, m.ate_corrected, (x) => num(x, 4));
+    const per = (r) => (r && isNum(r.delta_s) ? `per ${num(r.delta_s, r.delta_s % 1 ? 2 : 0)} s` : "per interval");
     if (m.rpe) {
-      stats("RPE translation (m per interval)", m.rpe.trans, (x) => num(x, 4));
-      stats("RPE rotation (° per interval)", m.rpe.rot_deg, (x) => num(x, 3));
+      stats(`RPE translation (m ${per(m.rpe)})${against(m.rpe_against)}`, m.rpe.trans, (x) => num(x, 4));
+      stats(`RPE rotation (° ${per(m.rpe)})${against(m.rpe_against)}`, m.rpe.rot_deg, (x) => num(x, 3));
+    }
+    if (m.rpe_frame) {
+      stats(`RPE translation (m per frame)${against(m.rpe_against)}`, m.rpe_frame.trans, (x) => num(x, 4));
+      stats(`RPE rotation (° per frame)${against(m.rpe_against)}`, m.rpe_frame.rot_deg, (x) => num(x, 3));
     }
     const head = el("thead", {}, el("tr", {}, ...["Error", "RMSE", "Mean", "Median", "Std", "Max"].map((h, i) => el("th", { class: i ? "n" : "" }, h))));
     const body = el("tbody", {}, ...rows.map((r) => el("tr", {}, ...r.map((c, i) => el("td", { class: i ? "n" : "" }, c)))));
@@ -89,6 +98,11 @@
     t.replaceChildren(...(rows.length ? [head, body] : []));
     t.hidden = !rows.length;
     if (m.evaluation_error) t.after(el("p", { class: "muted" }, "No ATE/RPE: " + m.evaluation_error));
+    $("metrics-gt-frame")?.remove();
+    if (marker && rows.length) t.parentNode.after(el("p", { id: "metrics-gt-frame", class: "muted small" },
+      `This sequence's ground truth is the pose of its ${m.groundtruth_frame}, not of the camera. ATE is given against it `
+      + "(the published convention) and against the camera's ground truth corrected from it; RPE only against the "
+      + "camera's, since against the marker it would measure the marker's lever arm rather than tracking."));
     // frames that were not tracked: trajectory.txt and the ATE hold only the tracked ones
     $("metrics-warnings")?.remove();
     const warnings = Array.isArray(m.warnings) ? m.warnings.filter((w) => typeof w === "string") : [];

@@ -5,8 +5,9 @@ The script, for an estimate P and ground truth Q (camera-to-world poses):
   by the closest timestamp, dropping a pair when either lookup is more than twice the ground truth's median
   sampling interval away (not the 0.02 s association of the ATE);
 - pairs (i, j): with `--fixed_delta`, j is the estimate pose closest in time to t_i + delta, and a pair whose
-  j is the last pose is dropped (that is where every late i lands); without it (the script's default), all
-  ordered pairs (i, j), i == j included;
+  j is the last pose is dropped (that is where every late i lands); with `--delta_unit f` the delta counts
+  estimate poses instead (j = i + delta: 1 pairs consecutive poses, the frame-to-frame drift); without
+  `--fixed_delta` (the script's default), all ordered pairs (i, j), i == j included;
 - E = (P_i^-1 P_j) (Q_i^-1 Q_j)^-1; the translation error is |t(E)| in metres, the rotation error the angle of
   R(E) (arccos((tr R - 1) / 2)), reported here in degrees.
 Pair sub-sampling: the script keeps `--max_pairs` (default 10000) random pairs when it has more, which makes
@@ -36,6 +37,7 @@ _BLOCK_PAIRS = 200_000  # pairs per vectorised chunk in all-pairs mode (bounded 
 
 class RpeMode(StrEnum):
     FIXED_DELTA = "fixed-delta"  # evaluate_rpe.py --fixed_delta --delta D (drift per D seconds)
+    FIXED_FRAMES = "fixed-frames"  # evaluate_rpe.py --fixed_delta --delta_unit f --delta D (per D poses)
     ALL_PAIRS = "all-pairs"  # evaluate_rpe.py's default (without its random sub-sampling)
 
 
@@ -44,23 +46,30 @@ class RpeResult:
     """Translation error in metres and rotation error in degrees over `pairs` pose pairs."""
 
     mode: RpeMode
-    delta_s: float | None  # the fixed interval; None in all-pairs mode
+    delta_s: float | None  # the fixed interval; None in all-pairs and fixed-frames modes
     max_pairs: int  # the sampling bound asked for; 0 = every pair
     pairs: int  # pairs evaluated (those with ground truth at both ends)
     trans: ErrorStats
     rot_deg: ErrorStats
+    delta_frames: int | None = None  # the fixed number of poses in fixed-frames mode, else None
 
     def to_dict(self) -> dict:
-        return {"mode": self.mode.value, "delta_s": self.delta_s, "max_pairs": self.max_pairs,
-                "pairs": self.pairs, "trans": asdict(self.trans), "rot_deg": asdict(self.rot_deg)}
+        out = {"mode": self.mode.value, "delta_s": self.delta_s, "max_pairs": self.max_pairs,
+               "pairs": self.pairs, "trans": asdict(self.trans), "rot_deg": asdict(self.rot_deg)}
+        if self.delta_frames is not None:
+            out["delta_frames"] = self.delta_frames
+        return out
 
 
 def relative_pose_error(groundtruth: Trajectory, estimate: Trajectory, mode: RpeMode = RpeMode.FIXED_DELTA,
-                        delta_s: float = 1.0, max_pairs: int = 0) -> RpeResult | None:
+                        delta_s: float = 1.0, max_pairs: int = 0, delta_frames: int = 1) -> RpeResult | None:
     """TUM's RPE of `estimate` against `groundtruth`; None when fewer than 2 pairs remain (the script fails).
-    `max_pairs` > 0 samples that many pairs when there are more (0: every pair)."""
+    `max_pairs` > 0 samples that many pairs when there are more (0: every pair). `delta_s` is used in
+    fixed-delta mode, `delta_frames` in fixed-frames mode."""
     if mode is RpeMode.FIXED_DELTA and delta_s <= 0:
         raise ValueError(f"delta_s must be positive, got {delta_s}")
+    if mode is RpeMode.FIXED_FRAMES and delta_frames < 1:
+        raise ValueError(f"delta_frames must be >= 1, got {delta_frames}")
     if max_pairs < 0:
         raise ValueError(f"max_pairs must be >= 0, got {max_pairs}")
     rng = np.random.default_rng(0)
@@ -74,8 +83,11 @@ def relative_pose_error(groundtruth: Trajectory, estimate: Trajectory, mode: Rpe
     q = q[gt_idx]  # (N_est, 4, 4) the ground truth at each estimate pose (valid where has_gt)
     n = len(t_est)
     chunks: Iterator[tuple[np.ndarray, np.ndarray]]
-    if mode is RpeMode.FIXED_DELTA:
-        j = _closest(t_est, t_est + delta_s)
+    if mode in (RpeMode.FIXED_DELTA, RpeMode.FIXED_FRAMES):
+        if mode is RpeMode.FIXED_DELTA:
+            j = _closest(t_est, t_est + delta_s)
+        else:  # the script's index_est = range(n): the closest index to i + delta, clipped to the last
+            j = np.minimum(np.arange(n) + delta_frames, n - 1)
         i = np.nonzero(j != n - 1)[0]
         if 0 < max_pairs < len(i):  # sampled before the ground-truth check, as the script does
             i = np.sort(rng.choice(i, max_pairs, replace=False))
@@ -92,7 +104,8 @@ def relative_pose_error(groundtruth: Trajectory, estimate: Trajectory, mode: Rpe
     if len(trans) < 2:
         return None
     return RpeResult(mode, delta_s if mode is RpeMode.FIXED_DELTA else None, max_pairs, len(trans),
-                     error_stats(trans), error_stats(rot))
+                     error_stats(trans), error_stats(rot),
+                     delta_frames if mode is RpeMode.FIXED_FRAMES else None)
 
 
 def _by_timestamp(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:

@@ -1,8 +1,9 @@
 """Bonn RGB-D Dynamic ground truth: the motion-capture marker's pose, corrected to the camera's.
 
 The dataset documents T_WC(t) = T_ROS · T_gt(t) · T_ROS · T_m. T_m's 3x3 block carries a small scale, so it is
-projected onto the nearest rotation (SVD) first. Runs are evaluated against the raw GT, as published Bonn results
-are; this correction is for comparisons (README, Sequences: it moves ATE on bonn_crowd_dev by at most 0.2 mm).
+projected onto the nearest rotation (SVD) first. A sequence whose camera says ``groundtruth_frame: bonn-marker``
+(the ``bonn`` preset) is scored with it (worker.slam.evaluation.groundtruth_frame): RPE against the corrected
+(camera) ground truth only, ATE both against the raw GT (as published Bonn results are) and the corrected one.
 """
 from __future__ import annotations
 

@@ -18,13 +18,17 @@ class RunEvaluation:
     """Per-frame ATE (m) by timestamp rounded to 6 decimals; None when it could not be scored."""
 
 
-def evaluate_run(groundtruth: Trajectory, traj: Trajectory, cfg: EvalConfig) -> RunEvaluation:
-    """Score `traj` against `groundtruth` with the run's `eval` settings; a failure is reported, not raised."""
-    from worker.slam.evaluation.metrics import evaluate  # evo is heavy: imported only when there is truth
+def evaluate_run(groundtruth: Trajectory, traj: Trajectory, cfg: EvalConfig,
+                 groundtruth_frame: str = "camera") -> RunEvaluation:
+    """Score `traj` against `groundtruth` (the pose of `groundtruth_frame`, see
+    `worker.slam.evaluation.groundtruth_frame`) with the run's `eval` settings; a failure is reported, not
+    raised. The aligned ground truth and per-frame errors are the published-convention ATE's (raw truth)."""
+    from worker.slam.evaluation.groundtruth_frame import evaluate_framed  # evo is heavy: only with truth
 
     try:
-        ev = evaluate(groundtruth, traj, cfg.max_diff_s, cfg.rpe_delta_s)
+        ev = evaluate_framed(groundtruth, traj, groundtruth_frame, cfg.max_diff_s, cfg.rpe_delta_s)
     except EvaluationError as exc:
-        return RunEvaluation({"evaluation_error": exc.message})
-    errors = {round(float(t), 6): float(e) for t, e in zip(ev.matched_timestamps, ev.ate_errors)}
-    return RunEvaluation(ev.to_dict(), ev.aligned_groundtruth, errors)
+        return RunEvaluation({"groundtruth_frame": groundtruth_frame, "evaluation_error": exc.message})
+    pub = ev.published
+    errors = {round(float(t), 6): float(e) for t, e in zip(pub.matched_timestamps, pub.ate_errors)}
+    return RunEvaluation(ev.to_dict(), pub.aligned_groundtruth, errors)

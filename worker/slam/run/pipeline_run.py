@@ -181,7 +181,7 @@ class PipelineRun:
         groundtruth = self.sequence.groundtruth if self.sequence is not None else None
         if groundtruth is not None:
             self._progress("evaluation")
-            ev = evaluate_run(groundtruth, traj, self.config.eval)
+            ev = evaluate_run(groundtruth, traj, self.config.eval, self.camera.groundtruth_frame)
             metrics.update(ev.metrics)
         rows = self.log.finished_rows(self.start, ev.ate_errors)
         return RunResult(traj, kf_traj, metrics, smap, tracked, cloud, rows, ev.aligned_groundtruth,
