@@ -23,6 +23,7 @@ PIPELINE = {  # a metrics.json as run_pipeline writes it, key order included
     "dense_points": 13879, "stage_info": {"features_removed": 23.1}, "peak_rss_mb": 731.9,
     "camera": {"fx": 535.4, "dist": [0.0, 0.0], "name": "synthetic"}, "preset": "full", "start": 0,
     "tracked_fraction": 0.9667, "warnings": ["1 of 30 frames (3.3 %) were not tracked"],
+    "version": "0.1.0", "commit": "8bdf8d68c02ddbe3c3f56e9aae6238f801917b4f",
     "culling": {"features_removed": 694, "truth": {"mask_iou": 0.17, "feature_precision": 0.85,
                                                    "feature_recall": 0.72, "frames_scored": {"mask": 29}}},
     "restoration": {"references": "both-sided", "truth": {"restoration_psnr": 20.5}},
@@ -78,3 +79,12 @@ def test_current_spelling_extends_old_rpe_and_leaves_current_blobs_alone():
     assert got["rpe"]["rot"] == {"rmse": 0.3} and got["rpe"]["trans"] == {"rmse": 0.011}  # nothing renamed
     assert got["rpe"]["rot_deg"]["rmse"] == 0.3 and old["rpe"].keys() == {"trans", "rot"}  # the input is untouched
     assert with_current_spelling({"rpe": {"trans_rmse": 1}})["rpe"]["trans"]["rmse"] == 1
+
+
+def test_version_and_commit_are_read_and_an_older_run_gains_neither():
+    m = RunMetrics.from_dict(PIPELINE)
+    assert m.version == "0.1.0" and m.commit == PIPELINE["commit"] and "version" not in m.extra
+    outside = {**PIPELINE, "commit": None}  # a run outside a git checkout: the key stays, null
+    assert json.loads(format_run_metrics(RunMetrics.from_dict(outside)))["commit"] is None
+    older = {k: v for k, v in PIPELINE.items() if k not in ("version", "commit")}
+    assert format_run_metrics(RunMetrics.from_dict(older)) == json.dumps(older, indent=2)
