@@ -243,7 +243,7 @@ class RunMetrics:
     def to_dict(self) -> dict[str, Any]:
         """The metrics.json shape (see the class docstring for the order)."""
         out: dict[str, Any] = {k: getattr(self, k) for k in _CORE}
-        if self.version is not None or self.commit is not None:  # a run that knew its version: both keys, the commit null outside a checkout
+        if self.version is not None or self.commit is not None:  # both keys; the commit null outside a checkout
             out.update({k: getattr(self, k) for k in _PROVENANCE})
         out.update(self.stages)
         if self.ate is not None:

@@ -129,11 +129,20 @@ const VTD = (() => {
   const statusBadge = (s) => el("span", { class: "badge st-" + s }, s);
   const shortId = (id) => el("code", { class: "id", title: id }, id.slice(0, 8));
 
+  /** What is left of a running job: "about 12 s left" while frames are tracked (the api's eta_s: the frames
+   *  left at the rate so far), "frames done, finishing…" once they are (dense map, evaluation, saving: no
+   *  estimate, rather than "0.0 s left" for as long as they take); "" otherwise. */
+  function etaText(job) {
+    if (job.status !== "running") return "";
+    if (job.frames_total > 0 && job.frames_done >= job.frames_total) return "frames done, finishing…";
+    return isNum(job.eta_s) ? `about ${seconds(job.eta_s)} left` : "";
+  }
+
   function progressCell(job) {
     if (job.status === "succeeded") return document.createTextNode(`${job.frames_total} frames`);
     if (job.status === "queued") return document.createTextNode("waiting for a worker");
     if (job.status !== "running") return document.createTextNode(job.frames_total ? `stopped at frame ${job.frames_done} of ${job.frames_total}` : "");
-    const eta = isNum(job.eta_s) ? ", about " + seconds(job.eta_s) + " left" : "";
+    const eta = etaText(job) ? ", " + etaText(job) : "";
     return el("span", {}, el("progress", { max: 1, value: job.progress || 0 }), " ",
       el("span", { class: "num small" }, `${Math.round(100 * (job.progress || 0))} % · ${job.stage || ""} · ${job.frames_done}/${job.frames_total} frames${eta}`));
   }
@@ -160,5 +169,5 @@ const VTD = (() => {
   }
 
   return { API, ApiError, api, showError, toast, el, num, metres, bytes, seconds, when, jobDuration, TERMINAL,
-    statusBadge, shortId, progressCell, followJob, authHeaders, askToken, errorFrom, isNum };
+    statusBadge, shortId, progressCell, etaText, followJob, authHeaders, askToken, errorFrom, isNum };
 })();

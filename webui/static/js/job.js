@@ -1,7 +1,7 @@
 /* Job page: live progress, metrics table, SVG plots drawn here (no libraries), previews, downloads, 3D viewer. */
 "use strict";
 (() => {
-  const { api, el, showError, num, metres, bytes, seconds, when, jobDuration, TERMINAL, statusBadge, followJob, isNum } = VTD;
+  const { api, el, showError, num, metres, bytes, seconds, when, jobDuration, TERMINAL, statusBadge, followJob, isNum, etaText } = VTD;
   const { parseTum, parseCsv, lineChart, barChart, note } = VTDPlot;
   const $ = (id) => document.getElementById(id);
   const jobId = document.getElementById("main").dataset.jobId;
@@ -30,7 +30,7 @@
     $("job-progress").hidden = !running;
     if (running) {
       $("job-bar").value = job.progress || 0;
-      const eta = isNum(job.eta_s) ? ` · about ${seconds(job.eta_s)} left` : "";
+      const eta = etaText(job) ? ` · ${etaText(job)}` : "";
       $("job-progress-text").textContent = job.status === "queued" ? "waiting for a worker"
         : `${Math.round(100 * (job.progress || 0))} % · ${job.stage}${eta}`;
     }
