@@ -45,6 +45,21 @@ class ComparisonRow:
         return dataclasses.asdict(self)
 
 
+# The comparison table's CSV names its columns with their units (the JSON table keeps the plain keys and says the
+# units in its schema). By prefix, so a new ATE/RPE column gets its unit too; first match wins.
+_CSV_UNITS = (("ate_", "m"), ("rpe_trans", "m"), ("rpe_rot", "deg"), ("restoration_psnr", "db"))
+
+
+def csv_header(column: str) -> str:
+    """The CSV header of a comparison-table column: the key with its unit (``ate_rmse`` -> ``ate_rmse_m``,
+    ``rpe_rot_rmse`` -> ``rpe_rot_rmse_deg``, ``restoration_psnr`` -> ``restoration_psnr_db``); unitless columns
+    (ids, counts, fps, fractions 0..1) as they are."""
+    for prefix, unit in _CSV_UNITS:
+        if column.startswith(prefix) and not column.endswith("_" + unit):
+            return f"{column}_{unit}"
+    return column
+
+
 def _unique(items: list[str], what: str) -> list[str]:
     if not items or not all(isinstance(i, str) and i for i in items):
         raise InvalidInput(f"{what} must be a non-empty list of non-empty strings")

@@ -39,7 +39,9 @@ def test_create_get_and_table(client, settings, queue, seqs):
     r = client.get(f"/api/v1/batches/{batch['id']}/table?format=csv")
     assert r.headers["content-type"].startswith("text/csv")
     rows = list(csv.DictReader(io.StringIO(r.text)))
-    assert rows[0]["rpe_rot_rmse"] == "0.25" and rows[0]["fps"] == "22.5" and rows[1]["ate_rmse"] == ""
+    assert rows[0]["rpe_rot_rmse_deg"] == "0.25" and rows[0]["fps"] == "22.5" and rows[1]["ate_rmse_m"] == ""
+    assert list(rows[0])[5:8] == ["ate_rmse_m", "rpe_trans_rmse_m", "rpe_rot_rmse_deg"]  # units in the header
+    assert "ate_rmse" in client.get(f"/api/v1/batches/{batch['id']}/table").json()[0]  # the JSON keeps its keys
     listed = client.get("/api/v1/batches").json()
     assert [b["id"] for b in listed["items"]] == [batch["id"]]
 
@@ -93,4 +95,4 @@ def test_named_batch_and_truth_scores_in_the_table(client, settings, seqs):
     assert (table["orb-only"]["mask_iou"], table["orb-only"]["restoration_psnr"],
             table["orb-only"]["relocalisations"]) == (None, None, 0)
     rows = list(csv.DictReader(io.StringIO(client.get(f"/api/v1/batches/{batch['id']}/table?format=csv").text)))
-    assert rows[0]["restoration_psnr"] == "24.5" and rows[1]["mask_iou"] == ""
+    assert rows[0]["restoration_psnr_db"] == "24.5" and rows[1]["mask_iou"] == ""
