@@ -168,6 +168,36 @@ const VTD = (() => {
     return () => { stopped = true; if (es) es.close(); clearTimeout(timer); };
   }
 
+  /**
+   * Wide tables scroll sideways inside their card (.scroll); where one does not fit, say so: a "scroll sideways"
+   * note above it and a fade at the edge still hiding columns (classes overflowing / at-end). Kept up to date
+   * as rows arrive, the window resizes and the table is scrolled; hidden again when the table fits.
+   */
+  function scrollHints() {
+    const hints = new Map();
+    const update = (box) => {
+      const hint = hints.get(box);
+      const over = box.scrollWidth > box.clientWidth + 1;
+      box.classList.toggle("overflowing", over);
+      box.classList.toggle("at-end", over && box.scrollLeft + box.clientWidth >= box.scrollWidth - 1);
+      if (hint) hint.hidden = !over;
+    };
+    const boxOf = (n) => (n instanceof Element ? n : n.parentElement)?.closest(".scroll");
+    const sized = new ResizeObserver((entries) => { for (const e of entries) { const b = boxOf(e.target); if (b) update(b); } });
+    const changed = new MutationObserver((records) => { for (const b of new Set(records.map((r) => boxOf(r.target)))) if (b) update(b); });
+    for (const box of document.querySelectorAll(".scroll")) {
+      const hint = el("div", { class: "scroll-hint", "aria-hidden": "true", hidden: true }, "scroll sideways for more →");
+      box.before(hint);
+      hints.set(box, hint);
+      box.addEventListener("scroll", () => update(box), { passive: true });
+      sized.observe(box);
+      for (const child of box.children) sized.observe(child); // the table widens as its rows arrive
+      changed.observe(box, { childList: true, subtree: true, characterData: true, attributes: true, attributeFilter: ["hidden"] });
+      update(box);
+    }
+  }
+  if ("ResizeObserver" in window && "MutationObserver" in window) scrollHints();
+
   return { API, ApiError, api, showError, toast, el, num, metres, bytes, seconds, when, jobDuration, TERMINAL,
     statusBadge, shortId, progressCell, etaText, followJob, authHeaders, askToken, errorFrom, isNum };
 })();
