@@ -18,13 +18,15 @@ from backend.api.errors import install_error_handlers
 from backend.api.head import HeadMiddleware
 from backend.api.pages import include_dashboard
 from backend.api.streams import StreamLimits
+from formats.version import package_version
 from storage.artifacts import ArtifactStore
 from storage.db import init_db, make_engine, make_session_factory
 from storage.ingest import sweep_stale_uploads
 from storage.settings import Settings, get_settings
 
 API_PREFIX = "/api/v1"
-VERSION = "0.1.0"
+VERSION = package_version()
+"""The installed package's (pyproject.toml): /health, OpenAPI and the dashboard's footer."""
 
 DESCRIPTION = """Dynamic-scene RGB-D SLAM service (VTD-SLAM).
 

@@ -26,6 +26,24 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from formats.version import describe
+
+        typer.echo(f"vtdslam {describe()}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True,
+                                 help="Print the package version (and the git commit in a checkout) and exit."),
+) -> None:
+    """VTD-SLAM: dynamic-scene RGB-D SLAM service, pipeline and tools."""
+
+
 for module in (augment_cmd, demo_cmd, eval_cmd, fetch_cmd, inspect_cmd, msnet_cmd, run_cmd, serve_cmd, synth_cmd,
                viewer_cmd, worker_cmd):
     module.register(app)

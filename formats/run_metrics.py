@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from formats.errors import FormatError
+from formats.version import PROVENANCE_KEYS
 
 Number = int | float
 
@@ -147,14 +148,16 @@ _CORE = (*_COUNTS, "fps", "tracking_fps", "tracking_cpu_ms", "timings_ms", "over
          "stage_info", "peak_rss_mb", "camera", "preset", "start", "tracked_fraction", "warnings")
 _LABELS = ("groundtruth_frame", "ate_against", "ate_corrected_against", "rpe_against")
 _EVALUATION = ("ate", "matched_poses", "rpe", *_LABELS, "ate_corrected", "rpe_frame", "evaluation_error")
+_PROVENANCE = PROVENANCE_KEYS  # ("version", "commit"): written after the core keys when known
 
 
 @dataclass
 class RunMetrics:
     """A run's ``metrics.json``. Key order on disk: the counters and figures below (always written, null where
-    unknown), the stages' summaries (:attr:`stages`), then the evaluation (``ate``, ``matched_poses``, ``rpe``,
-    ``groundtruth_frame``, the ``*_against`` labels, ``ate_corrected``, ``rpe_frame`` when there is ground truth,
-    or ``evaluation_error``), then keys this schema does not know (:attr:`extra`)."""
+    unknown), ``version`` and ``commit`` (both, the commit null outside a git checkout; a run older than them
+    has neither), the stages' summaries (:attr:`stages`), then the evaluation (``ate``, ``matched_poses``,
+    ``rpe``, ``groundtruth_frame``, the ``*_against`` labels, ``ate_corrected``, ``rpe_frame`` when there is
+    ground truth, or ``evaluation_error``), then keys this schema does not know (:attr:`extra`)."""
 
     frames: int | None = None
     """Frames processed."""
@@ -204,6 +207,10 @@ class RunMetrics:
     """``tracked / frames`` (0..1): below 1, trajectory.txt holds only the tracked frames' poses."""
     warnings: list[str] = field(default_factory=list)
     """What a user should know about the result (frames that were not tracked, ...); empty when nothing."""
+    version: str | None = None
+    """The vtdslam package version that produced the run (``formats.version``); None for older runs."""
+    commit: str | None = None
+    """The git commit (40 hex digits) of the checkout that produced the run; None outside a git checkout."""
     stages: dict[str, dict[str, Any]] = field(default_factory=dict)
     """Each stage's summary by stage name (``culling``, ``restoration``), a stage's own shape; with truth a
     ``truth`` entry (see :meth:`truth_scores`)."""
@@ -239,10 +246,11 @@ class RunMetrics:
     def from_dict(cls, d: Mapping[str, Any]) -> RunMetrics:
         """A metrics.json blob; absent or malformed entries are None (or empty), old RPE spellings are read."""
         d = d if isinstance(d, Mapping) else {}
-        known = {*_CORE, *_EVALUATION}
+        known = {*_CORE, *_PROVENANCE, *_EVALUATION}
         stages = {k: dict(v) for k, v in d.items() if k not in known and isinstance(v, Mapping)}
         extra = {k: v for k, v in d.items() if k not in known and k not in stages}
         err, preset = d.get("evaluation_error"), d.get("preset")
+        version, commit = d.get("version"), d.get("commit")
         overlapped = d.get("overlapped_stages")
         return cls(
             **{k: _count(d.get(k)) for k in _COUNTS},
@@ -252,7 +260,9 @@ class RunMetrics:
             dense_points=_count(d.get("dense_points")), stage_info=_dict(d.get("stage_info")) or {},
             peak_rss_mb=number(d.get("peak_rss_mb")), camera=_dict(d.get("camera")) or {},
             preset=preset if isinstance(preset, str) else None, start=_count(d.get("start")),
-            tracked_fraction=number(d.get("tracked_fraction")), warnings=_strings(d.get("warnings")), stages=stages,
+            tracked_fraction=number(d.get("tracked_fraction")), warnings=_strings(d.get("warnings")),
+            version=version if isinstance(version, str) else None, commit=commit if isinstance(commit, str) else None,
+            stages=stages,
             ate=ErrorStats.from_dict(d.get("ate")), matched_poses=_count(d.get("matched_poses")),
             rpe=RpeMetrics.from_dict(d.get("rpe")),
             groundtruth_frame=_string(d.get("groundtruth_frame")), ate_against=_string(d.get("ate_against")),
@@ -265,6 +275,8 @@ class RunMetrics:
     def to_dict(self) -> dict[str, Any]:
         """The metrics.json shape (see the class docstring for the order)."""
         out: dict[str, Any] = {k: getattr(self, k) for k in _CORE}
+        if self.version is not None or self.commit is not None:  # both keys; the commit null outside a checkout
+            out.update({k: getattr(self, k) for k in _PROVENANCE})
         out.update(self.stages)
         if self.ate is not None:
             out["ate"] = self.ate.to_dict()

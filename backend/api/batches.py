@@ -21,6 +21,8 @@ from storage.repositories import batches
 router = APIRouter(prefix="/batches", tags=["batches"], route_class=GuardedRoute)
 
 TABLE_COLUMNS = list(TableRow.model_fields)
+CSV_COLUMNS = [batches.csv_header(c) for c in TABLE_COLUMNS]
+"""The CSV's header: the JSON table's keys with their units (ate_rmse_m, rpe_rot_rmse_deg, ...)."""
 
 
 @router.post(
@@ -60,7 +62,7 @@ def get_batch(batch_id: BatchId, session: SessionDep) -> BatchOut:
     "/{batch_id}/table",
     response_model=list[TableRow],
     responses={
-        200: {"content": {"text/csv": {"example": ",".join(TABLE_COLUMNS) + "\n"}}},
+        200: {"content": {"text/csv": {"example": ",".join(CSV_COLUMNS) + "\n"}}},
         **error_responses(404, 422),
     },
 )
@@ -69,15 +71,17 @@ def get_table(
     session: SessionDep,
     format: Annotated[Literal["json", "csv"], Query(description="json (default) or csv")] = "json",
 ) -> list[TableRow] | Response:
-    """ATE RMSE (m), RPE translation (m) and rotation (deg) RMSE and fps per sequence and preset."""
+    """ATE RMSE (m), RPE translation (m) and rotation (deg) RMSE and fps per sequence and preset. The CSV's header
+    names the units (ate_rmse_m, rpe_trans_rmse_m, rpe_rot_rmse_deg, restoration_psnr_db); the JSON keeps the keys."""
     rows = [TableRow.of(r) for r in batches.comparison(session, batch_id)]
     if format == "json":
         return rows
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=TABLE_COLUMNS, lineterminator="\n")
-    writer.writeheader()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(CSV_COLUMNS)
     for row in rows:
-        writer.writerow({k: ("" if v is None else v) for k, v in row.model_dump().items()})
+        cells = row.model_dump()
+        writer.writerow(["" if cells[k] is None else cells[k] for k in TABLE_COLUMNS])
     return Response(
         buf.getvalue(),
         media_type="text/csv; charset=utf-8",

@@ -14,6 +14,7 @@ from formats.run_metrics import with_current_spelling
 from storage.models import Batch, Job, JobStatus, Sequence
 from storage.presets import DEFAULT_PIPELINE_PRESET
 from storage.repositories.batches import ComparisonRow
+from storage.repositories.jobs import FINISHED_STAGE, run_seconds, timings_ms
 
 T = TypeVar("T")
 
@@ -149,13 +150,20 @@ class JobOut(BaseModel):
     preset: str
     status: JobStatus
     progress: float
-    stage: str
+    stage: str = Field(description="The running job's step: starting, tracking, dense, evaluation, writing, saving; "
+                       f"{FINISHED_STAGE!r} once it ended (its status says how); empty while queued.")
     frames_done: int
     frames_total: int
-    eta_s: float | None = Field(description="Estimated seconds left while running.")
+    eta_s: float | None = Field(description="Estimated seconds left for the frames still to track, at the rate so "
+                                "far; null once every frame is tracked (the run is finishing: dense map, evaluation, "
+                                "saving) and when the job is not running.")
     config: dict[str, Any]
     error: str | None
-    timings: dict[str, Any]
+    timings: dict[str, Any] = Field(description="All milliseconds: the run's mean time per call by step (as "
+                                    "metrics.json's timings_ms) and run_ms, the whole pipeline call. Jobs stored "
+                                    "before had run_s (seconds) here: shown as run_ms.")
+    run_s: float | None = Field(default=None, description="Seconds the pipeline ran (timings.run_ms / 1000); null "
+                                "until the job succeeded.")
     created_at: datetime
     started_at: datetime | None
     finished_at: datetime | None
@@ -184,6 +192,7 @@ class JobOut(BaseModel):
                     "config": {},
                     "error": None,
                     "timings": {},
+                    "run_s": None,
                     "created_at": "2026-01-01T12:00:00Z",
                     "started_at": "2026-01-01T12:00:01Z",
                     "finished_at": None,
@@ -212,7 +221,8 @@ class JobOut(BaseModel):
             eta_s=eta_seconds(job),
             config=job.config,
             error=job.error,
-            timings=job.timings,
+            timings=timings_ms(job.timings),
+            run_s=run_seconds(job.timings),
             created_at=job.created_at,
             started_at=job.started_at,
             finished_at=job.finished_at,
@@ -225,7 +235,12 @@ class JobOut(BaseModel):
 
 
 def eta_seconds(job: Job) -> float | None:
+    """Seconds left for the frames still to track at the rate so far; None once they are all tracked: the stages
+    after the frame loop (dense map, evaluation, saving) report no progress to extrapolate, and "0 s left" for as
+    long as they take would be wrong (the dashboard says "finishing" instead)."""
     if job.status != JobStatus.RUNNING or job.started_at is None or job.frames_done <= 0:
+        return None
+    if job.frames_done >= job.frames_total:
         return None
     elapsed = (datetime.now(UTC) - job.started_at).total_seconds()
     left = max(0, job.frames_total - job.frames_done)

@@ -59,6 +59,20 @@ class ComparisonRow:
         return dataclasses.asdict(self)
 
 
+# The comparison table's CSV names its columns with their units (the JSON table keeps the plain keys and says the
+# units in its schema). By prefix, so a new ATE/RPE column gets its unit too; first match wins.
+def csv_header(column: str) -> str:
+    """The CSV header of a comparison-table column: an error figure with its unit (``ate_rmse`` -> ``ate_rmse_m``,
+    ``rpe_frame_rot_rmse`` -> ``rpe_frame_rot_rmse_deg``, ``restoration_psnr`` -> ``restoration_psnr_db``);
+    labels (``ate_against``), ids, counts, fps and fractions 0..1 as they are."""
+    unit = None
+    if column.endswith("_rmse"):
+        unit = "deg" if "_rot" in column else "m" if column.startswith(("ate_", "rpe_")) else None
+    elif column == "restoration_psnr":
+        unit = "db"
+    return column if unit is None else f"{column}_{unit}"
+
+
 def _unique(items: list[str], what: str) -> list[str]:
     if not items or not all(isinstance(i, str) and i for i in items):
         raise InvalidInput(f"{what} must be a non-empty list of non-empty strings")

@@ -25,6 +25,34 @@ from storage.sqltypes import utcnow
 ACTIVE = (JobStatus.QUEUED, JobStatus.RUNNING)
 RETRYABLE = (JobStatus.FAILED, JobStatus.CANCELLED)
 
+FINISHED_STAGE = "done"
+"""The stage of a job that ended (succeeded, failed or cancelled): its status says how."""
+
+RUN_MS = "run_ms"
+"""The key of a job's ``timings`` (all milliseconds) holding the whole pipeline call; older jobs stored seconds
+under ``run_s``: :func:`run_seconds` reads either."""
+
+
+def run_seconds(timings: dict[str, Any] | None) -> float | None:
+    """The pipeline's wall time of a job in seconds, from its ``timings`` (``run_ms``, or an older ``run_s``)."""
+    timings = timings or {}
+    ms, s = timings.get(RUN_MS), timings.get("run_s")
+    if isinstance(ms, int | float) and not isinstance(ms, bool):
+        return round(ms / 1000, 3)
+    if isinstance(s, int | float) and not isinstance(s, bool):
+        return float(s)
+    return None
+
+
+def timings_ms(timings: dict[str, Any] | None) -> dict[str, Any]:
+    """A job's ``timings`` in milliseconds throughout: an older job's ``run_s`` (seconds) becomes ``run_ms``."""
+    out = dict(timings or {})
+    if "run_s" in out:
+        s = out.pop("run_s")
+        if RUN_MS not in out and isinstance(s, int | float) and not isinstance(s, bool):
+            out[RUN_MS] = round(1000 * s, 1)
+    return out
+
 
 def create(
     session: Session,
@@ -224,6 +252,7 @@ def request_cancel(session: Session, job_id: str) -> Job:
             status=JobStatus.CANCELLED,
             cancel_requested=True,
             finished_at=now,
+            stage=FINISHED_STAGE,
         ) or _transition(session, job_id, Job.status == JobStatus.RUNNING, cancel_requested=True)
     job = get(session, job_id)
     if not done and job.status != JobStatus.CANCELLED:
@@ -250,7 +279,7 @@ def finish(
         raise InvalidInput(f"unknown status {status!r}") from None
     if not status.is_terminal:
         raise InvalidInput(f"finish needs a final status, not {status.value}")
-    values: dict[str, Any] = {"status": status, "finished_at": utcnow(), "error": error}
+    values: dict[str, Any] = {"status": status, "finished_at": utcnow(), "error": error, "stage": FINISHED_STAGE}
     if status == JobStatus.SUCCEEDED:
         values["progress"] = 1.0
     if timings is not None:
@@ -362,7 +391,7 @@ def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeu
         stmt = (  # this death follows automatic requeues after earlier ones: a poison job
             update(Job)
             .where(*running, Job.requeues >= POISON_DEATHS - 1, Job.cancel_requested.is_(False))
-            .values(status=JobStatus.FAILED, finished_at=utcnow(),
+            .values(status=JobStatus.FAILED, finished_at=utcnow(), stage=FINISHED_STAGE,
                     error=POISON_ERROR.format(deaths=POISON_DEATHS))
             .returning(Job.id)
             .execution_options(synchronize_session=False)
@@ -371,7 +400,7 @@ def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeu
         stmt = (
             update(Job)
             .where(*running)
-            .values(status=JobStatus.FAILED, finished_at=utcnow(), error=error)
+            .values(status=JobStatus.FAILED, finished_at=utcnow(), stage=FINISHED_STAGE, error=error)
             .returning(Job.id)
             .execution_options(synchronize_session=False)
         )

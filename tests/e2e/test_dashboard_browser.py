@@ -4,8 +4,10 @@ Through the pages only: upload a generated sequence (drag-and-drop input, progre
 error in words, the same archive again refused as a duplicate, an upload cancelled half-way leave nothing
 behind, start a job, follow it live to the end, see it on the first page, check the job page's metrics table,
 truth scores and SVG plots, open the embedded 3D viewer (≥ 10 s of real time for SwiftShader's WebGL), run a
-named batch and read its table, plots and truth scores, see a cancelled job shown as cancelled; then every
-page at 400 and 1400 px wide: no sideways page scroll, every button on screen, no console error.
+named batch and read its table, plots and truth scores, the full run's previews in the order rgb, mask, restored
+and its code version, see a cancelled job shown as cancelled; then every page at 400 and 1400 px wide: no
+sideways page scroll, every button on screen, no console error, a "scroll sideways" hint on exactly the tables
+that do not fit (the sequence, jobs and metrics tables at 400 px).
 Screenshots of every page go to ``$VTD_SCREENSHOT_DIR`` (default: a temp folder printed by the test); the
 job page's time to first render and page weight on loopback are printed.
 
@@ -316,6 +318,15 @@ def test_dashboard_flow(page, js_errors: list[str], service: ServiceProcesses, a
     expect(page.locator("#truth-table")).to_contain_text("Mask IoU")
     expect(page.locator("#truth-table")).to_contain_text("Restoration PSNR")
     expect(page.locator("#truth-table")).to_contain_text("Missed by segmentation")  # MSNET's run splits the misses
+    # the frames as a reader follows them: the input, the mask culled from it, the frame restored behind it
+    expect(page.locator("#previews figure").first).to_be_visible()
+    captions = page.locator("#previews figcaption").all_inner_texts()  # "frame 000012 rgb"
+    assert _preview_order_ok(captions) and {c.rsplit(" ", 1)[-1] for c in captions} >= {"rgb", "mask", "restored"}, \
+        captions
+    # the code that produced the figures
+    from formats.version import package_version
+
+    expect(page.locator("#code-version")).to_contain_text(package_version())
     _shot(page, shots, "09_job_truth")
 
     # --- a cancelled job reads as cancelled, not as an error ---
@@ -333,7 +344,9 @@ def test_dashboard_flow(page, js_errors: list[str], service: ServiceProcesses, a
     assert not js_errors, js_errors
     _layout_at_every_width(page.context.browser, service, shots, {
         "first_page": ("/", "#recent-runs li[data-job]"),
+        "sequences": ("/sequences", "#seq-body tr"),
         "jobs": ("/jobs", "#jobs-body tr[id]"),
+        "job": (f"/jobs/{job_id}", "#metrics-table tbody tr"),
         "job_truth": (f"/jobs/{full_job}", "#truth-card:not([hidden])"),
         "batch": (f"/batches/{batch_id}", "#plot-traj svg path.series"),
         "job_cancelled": (f"/jobs/{cancelled['id']}", "#job-cancelled:not([hidden])"),
@@ -348,13 +361,41 @@ def test_dashboard_flow(page, js_errors: list[str], service: ServiceProcesses, a
     assert not js_errors, js_errors
 
 
+PREVIEW_KINDS = ("rgb", "mask", "restored")
+
+
+def _preview_order_ok(captions: list[str]) -> bool:
+    """Previews by frame, each frame's in the order rgb, mask, restored (not alphabetical)."""
+    keys = [(c.rsplit(" ", 1)[0], c.rsplit(" ", 1)[-1]) for c in captions]
+    rank = [(frame, PREVIEW_KINDS.index(kind) if kind in PREVIEW_KINDS else len(PREVIEW_KINDS)) for frame, kind in keys]
+    return rank == sorted(rank)
+
+
 def _batch_done(service: ServiceProcesses, batch_id: str) -> bool:
     return httpx.get(f"{service.base}/api/v1/batches/{batch_id}", timeout=10).json()["status"] == "finished"
 
 
+# Each visible sideways-scrolling box (.scroll): does its table overflow, and is its "scroll sideways" hint shown
+# (the .scroll-hint before it) and the fade on (class overflowing)?
+SCROLL_HINTS_JS = """() => [...document.querySelectorAll('.scroll')].filter((b) => b.offsetParent !== null).map((b) => {
+    let hint = b.previousElementSibling;
+    while (hint && !hint.classList.contains('scroll-hint')) hint = hint.previousElementSibling;
+    const table = b.querySelector('table');
+    return {table: table ? table.id : '', over: b.scrollWidth > b.clientWidth + 1,
+            hint: !!hint && hint.offsetParent !== null && hint.getBoundingClientRect().right <= window.innerWidth + 0.5,
+            fade: b.classList.contains('overflowing')};
+})"""
+# The tables the issue saw cut without a word at 400 px: each must scroll with its hint there.
+NARROW_WIDTH = 400
+OVERFLOWING_AT_400 = {"seq-table", "jobs-table", "metrics-table"}
+
+
 def _layout_at_every_width(browser, service: ServiceProcesses, shots: Path, pages: dict[str, tuple[str, str]]) -> None:
-    """Each page, fresh, at each width: no sideways page scroll, buttons on screen, not one console error."""
+    """Each page, fresh, at each width: no sideways page scroll, buttons on screen, not one console error; every
+    table that does not fit scrolls with a visible hint (and only those), the sequence, jobs and metrics tables
+    at 400 px among them."""
     problems = []
+    seen: set[str] = set()  # tables shown overflowing with their hint at NARROW_WIDTH
     for width in LAYOUT_WIDTHS:
         context = browser.new_context(viewport={"width": width, "height": 900}, base_url=service.base)
         try:
@@ -371,6 +412,15 @@ def _layout_at_every_width(browser, service: ServiceProcesses, shots: Path, page
                 if got["scroll"] > got["viewport"] or got["offscreen"] or console:
                     problems.append(f"{width} px {path}: {got}, console errors {console}")
                 console.clear()
+                boxes = pg.evaluate(SCROLL_HINTS_JS)  # a hint exactly where a table does not fit
+                wrong = [b for b in boxes if b["hint"] != b["over"] or b["fade"] != b["over"]]
+                if wrong:
+                    problems.append(f"{width} px {path}: scroll hint not matching the overflow: {wrong}")
+                if width == NARROW_WIDTH:
+                    seen.update(b["table"] for b in boxes if b["over"] and b["hint"])
         finally:
             context.close()
+    if NARROW_WIDTH in LAYOUT_WIDTHS and not OVERFLOWING_AT_400 <= seen:
+        missing = sorted(OVERFLOWING_AT_400 - seen)
+        problems.append(f"at {NARROW_WIDTH} px no scroll hint on {missing} (seen: {sorted(seen)})")
     assert not problems, "\n".join(problems)

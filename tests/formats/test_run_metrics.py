@@ -23,6 +23,7 @@ PIPELINE = {  # a metrics.json as run_pipeline writes it, key order included
     "dense_points": 13879, "stage_info": {"features_removed": 23.1}, "peak_rss_mb": 731.9,
     "camera": {"fx": 535.4, "dist": [0.0, 0.0], "name": "synthetic"}, "preset": "full", "start": 0,
     "tracked_fraction": 0.9667, "warnings": ["1 of 30 frames (3.3 %) were not tracked"],
+    "version": "0.1.0", "commit": "8bdf8d68c02ddbe3c3f56e9aae6238f801917b4f",
     "culling": {"features_removed": 694, "truth": {"mask_iou": 0.17, "feature_precision": 0.85,
                                                    "feature_recall": 0.72, "frames_scored": {"mask": 29}}},
     "restoration": {"references": "both-sided", "truth": {"restoration_psnr": 20.5}},
@@ -96,3 +97,12 @@ def test_groundtruth_frame_keys_round_trip_in_the_pipelines_order():
     assert m.rpe_frame is not None and m.rpe_frame.delta_frames == 1 and m.rpe_frame.mode == "fixed-frames"
     old = RunMetrics.from_dict(PIPELINE)  # a run made before the frame was recorded
     assert old.groundtruth_frame is None and old.ate_corrected is None and old.rpe_frame is None
+
+
+def test_version_and_commit_are_read_and_an_older_run_gains_neither():
+    m = RunMetrics.from_dict(PIPELINE)
+    assert m.version == "0.1.0" and m.commit == PIPELINE["commit"] and "version" not in m.extra
+    outside = {**PIPELINE, "commit": None}  # a run outside a git checkout: the key stays, null
+    assert json.loads(format_run_metrics(RunMetrics.from_dict(outside)))["commit"] is None
+    older = {k: v for k, v in PIPELINE.items() if k not in ("version", "commit")}
+    assert format_run_metrics(RunMetrics.from_dict(older)) == json.dumps(older, indent=2)

@@ -78,7 +78,9 @@ def test_success_stores_artifacts_metrics_frame_stats_and_config(ctx, job_id):
     assert job.status == JobStatus.SUCCEEDED and job.progress == 1.0 and job.worker == "w1"
     assert job.frames_done == job.frames_total == 5
     assert job.config == {"name": "orb-only", "dense.enabled": False}
-    assert job.timings["tracking"] == 3.0 and "run_s" in job.timings
+    # timings are all milliseconds: the run's steps and run_ms, the whole pipeline call; the stage says it ended
+    assert job.timings["tracking"] == 3.0 and job.timings["run_ms"] >= 0 and "run_s" not in job.timings
+    assert job.stage == jobs.FINISHED_STAGE == "done"
     call = ctx.pipeline.calls[0]
     assert call["camera"] == {"preset": "tum1"} and call["overrides"] == {"dense.enabled": False}
     assert call["sequence_dir"] == ctx.store.root / "sequences/s"
@@ -110,7 +112,7 @@ def test_cancel_mid_run_stops_the_pipeline(ctx, job_id):
     ctx.pipeline = FakePipeline(frames=50, on_frame=cancel)
     assert execute_job(ctx, job_id) == JobStatus.CANCELLED
     job = _job(ctx, job_id)
-    assert job.status == JobStatus.CANCELLED and job.frames_done < 5
+    assert job.status == JobStatus.CANCELLED and job.frames_done < 5 and job.stage == jobs.FINISHED_STAGE
     assert "cancelled after" in job.error
     assert {a.name for a in ctx.store.list(job_id)} == {"log.txt"}
 
@@ -127,7 +129,7 @@ def test_failures_become_failed_jobs_with_the_message(ctx, job_id, error, messag
     ctx.pipeline = FakePipeline(error=error)
     assert execute_job(ctx, job_id) == JobStatus.FAILED
     job = _job(ctx, job_id)
-    assert message in job.error
+    assert message in job.error and job.stage == jobs.FINISHED_STAGE
     assert "Traceback" in ctx.store.path(job_id, "log.txt").read_text()
     with ctx.session_factory() as s:
         assert metrics.get_frame_stats(s, job_id) == []

@@ -11,6 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from formats.catalog import PIPELINE_PRESETS, PipelinePreset, StageContract, StageOrderError, check_stage_order
+from formats.version import PROVENANCE_KEYS
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig
 from worker.slam.dynamic.stage import CullingStage, CullingStageConfig
@@ -41,7 +42,9 @@ class Catalog:
         return PipelineConfig.with_sections(self.sections)
 
     def config_from_dict(self, d: dict) -> PipelineConfig:
-        """A config from a (possibly partial) snapshot, e.g. a run's config.json; missing values are defaults."""
+        """A config from a (possibly partial) snapshot, e.g. a run's config.json; missing values are defaults. The
+        code's ``version`` and ``commit`` a run's config.json carries (`formats.version`) are not config: skipped."""
+        d = {k: v for k, v in d.items() if k not in PROVENANCE_KEYS}
         return PipelineConfig.from_dict(d, base=self.base_config())
 
     def preset(self, name: str, overrides: dict | None = None) -> PipelineConfig:

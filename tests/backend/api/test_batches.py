@@ -40,7 +40,9 @@ def test_create_get_and_table(client, settings, queue, seqs):
     r = client.get(f"/api/v1/batches/{batch['id']}/table?format=csv")
     assert r.headers["content-type"].startswith("text/csv")
     rows = list(csv.DictReader(io.StringIO(r.text)))
-    assert rows[0]["rpe_rot_rmse"] == "0.25" and rows[0]["fps"] == "22.5" and rows[1]["ate_rmse"] == ""
+    assert rows[0]["rpe_rot_rmse_deg"] == "0.25" and rows[0]["fps"] == "22.5" and rows[1]["ate_rmse_m"] == ""
+    assert list(rows[0])[5:8] == ["ate_rmse_m", "rpe_trans_rmse_m", "rpe_rot_rmse_deg"]  # units in the header
+    assert "ate_rmse" in client.get(f"/api/v1/batches/{batch['id']}/table").json()[0]  # the JSON keeps its keys
     listed = client.get("/api/v1/batches").json()
     assert [b["id"] for b in listed["items"]] == [batch["id"]]
 
@@ -94,7 +96,7 @@ def test_named_batch_and_truth_scores_in_the_table(client, settings, seqs):
     assert (table["orb-only"]["mask_iou"], table["orb-only"]["restoration_psnr"],
             table["orb-only"]["relocalisations"]) == (None, None, 0)
     rows = list(csv.DictReader(io.StringIO(client.get(f"/api/v1/batches/{batch['id']}/table?format=csv").text)))
-    assert rows[0]["restoration_psnr"] == "24.5" and rows[1]["mask_iou"] == ""
+    assert rows[0]["restoration_psnr_db"] == "24.5" and rows[1]["mask_iou"] == ""
 
 
 def test_marker_ground_truth_is_labelled_in_the_table_and_csv(client, settings, seqs):
@@ -121,8 +123,8 @@ def test_marker_ground_truth_is_labelled_in_the_table_and_csv(client, settings, 
     assert row["groundtruth_frame"] == "bonn-marker" and row["rpe_against"] == corrected
     assert "published convention" in row["ate_against"] and row["ate_corrected_against"] == corrected
     csv_row = next(csv.DictReader(io.StringIO(client.get(f"/api/v1/batches/{batch['id']}/table?format=csv").text)))
-    assert csv_row["ate_corrected_rmse"] == "0.0164" and csv_row["rpe_against"] == corrected
-    assert csv_row["rpe_frame_rot_rmse"] == "0.366" and csv_row["groundtruth_frame"] == "bonn-marker"
+    assert csv_row["ate_corrected_rmse_m"] == "0.0164" and csv_row["rpe_against"] == corrected
+    assert csv_row["rpe_frame_rot_rmse_deg"] == "0.366" and csv_row["groundtruth_frame"] == "bonn-marker"
     job = client.get(f"/api/v1/jobs/{job_id}").json()  # the api hands the labelled blob on as it is
     assert job["metrics"]["rpe_against"] == corrected and job["metrics"]["ate_corrected"]["rmse"] == 0.0164
 

@@ -1,11 +1,13 @@
 """Health, OpenAPI, and the one error shape for routing mistakes."""
 from __future__ import annotations
 
+from formats.version import package_version
+
 
 def test_health(client):
     r = client.get("/api/v1/health")
     assert r.status_code == 200
-    assert r.json() == {"status": "ok", "version": "0.1.0", "database": "ok"}
+    assert r.json() == {"status": "ok", "version": package_version(), "database": "ok"}
 
 
 def test_openapi_lists_every_endpoint_with_examples(client):

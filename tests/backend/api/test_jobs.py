@@ -8,7 +8,7 @@ import pytest
 from formats import catalog
 from storage.artifacts import ArtifactStore
 from storage.db import make_engine, make_session_factory
-from storage.models import JobStatus
+from storage.models import Job, JobStatus
 from storage.presets import CAMERA_PRESETS, PIPELINE_PRESETS
 from storage.repositories import jobs, metrics
 from tests.backend.api.conftest import upload
@@ -158,12 +158,18 @@ def test_running_job_has_progress_and_eta_then_metrics(client, db, settings, seq
     complete(db, settings, job["id"], JobStatus.RUNNING)
     got = client.get(f"/api/v1/jobs/{job['id']}").json()
     assert got["status"] == "running" and got["frames_done"] == 3 and got["stage"] == "tracking"
-    assert got["eta_s"] is not None and got["eta_s"] >= 0
+    assert got["eta_s"] is not None and got["eta_s"] >= 0 and got["run_s"] is None
+    with db() as s:  # every frame tracked, the run finishing (dense map, evaluation, saving): no "0 s left"
+        jobs.update_progress(s, job["id"], frames_done=6, frames_total=6, stage="saving", progress=0.98)
+    got = client.get(f"/api/v1/jobs/{job['id']}").json()
+    assert got["status"] == "running" and got["stage"] == "saving" and got["eta_s"] is None
     with db() as s:
         metrics.save_run_metrics(s, job["id"], METRICS)
-        jobs.finish(s, job["id"], JobStatus.SUCCEEDED)
+        jobs.finish(s, job["id"], JobStatus.SUCCEEDED, timings={"tracking": 3.0, "run_ms": 2500.0})
     got = client.get(f"/api/v1/jobs/{job['id']}").json()
     assert got["status"] == "succeeded" and got["metrics"]["ate"]["rmse"] == 0.01 and got["progress"] == 1.0
+    assert got["stage"] == "done" and got["eta_s"] is None
+    assert got["timings"] == {"tracking": 3.0, "run_ms": 2500.0} and got["run_s"] == 2.5
     rpe = got["metrics"]["rpe"]  # an old spelling (rot) is served as stored, and under today's name (rot_deg) too
     assert rpe["rot"] == {"rmse": 0.2} and rpe["rot_deg"]["rmse"] == 0.2 and rpe["trans"] == {"rmse": 0.005}
 
@@ -280,3 +286,13 @@ def test_frames_and_presets(client, db, settings, seq_id):
     presets = client.get("/api/v1/presets").json()
     assert presets == {"pipeline": list(PIPELINE_PRESETS), "camera": list(CAMERA_PRESETS)}
     assert "tum1" in presets["camera"]
+
+
+def test_an_older_jobs_run_s_is_served_in_milliseconds_and_at_the_top(client, db, settings, seq_id):
+    job = new_job(client, seq_id)
+    complete(db, settings, job["id"])
+    with db() as s:  # what workers stored before timings became all milliseconds
+        s.get(Job, job["id"]).timings = {"tracking": 3.0, "run_s": 1.25}
+        s.commit()
+    got = client.get(f"/api/v1/jobs/{job['id']}").json()
+    assert got["timings"] == {"tracking": 3.0, "run_ms": 1250.0} and got["run_s"] == 1.25

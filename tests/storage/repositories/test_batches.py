@@ -102,3 +102,12 @@ def test_comparison_keeps_cells_of_deleted_sequence(session: Session, two: list[
     rows = batches.comparison(session, batch.id)
     assert [(r.sequence_id, r.sequence_name, r.job_id, r.status) for r in rows][0] == (two[0].id, None, None, None)
     assert rows[1].status == "queued"
+
+
+def test_csv_headers_carry_units() -> None:
+    from storage.repositories.batches import csv_header
+
+    got = [csv_header(c) for c in ("sequence_id", "ate_rmse", "rpe_trans_rmse", "rpe_rot_rmse", "fps", "mask_iou",
+                                   "restoration_psnr", "ate_rmse_corrected", "ate_rmse_m")]
+    assert got == ["sequence_id", "ate_rmse_m", "rpe_trans_rmse_m", "rpe_rot_rmse_deg", "fps", "mask_iou",
+                   "restoration_psnr_db", "ate_rmse_corrected_m", "ate_rmse_m"]

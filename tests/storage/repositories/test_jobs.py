@@ -152,6 +152,7 @@ def test_finish(session: Session, job: Job) -> None:
     assert jobs.claim(session, job.id, "w")
     done = jobs.finish(session, job.id, "succeeded", timings={"total": 2.0})
     assert (done.status, done.progress, done.timings, done.error) == (JobStatus.SUCCEEDED, 1.0, {"total": 2.0}, None)
+    assert done.stage == jobs.FINISHED_STAGE  # not the last running step ("saving")
     assert done.started_at is not None and done.finished_at is not None
     assert done.finished_at >= done.started_at
     with pytest.raises(Conflict):
@@ -204,11 +205,12 @@ def test_reap_orphaned_without_requeues_fails(session: Session, seq: Sequence) -
     assert jobs.reap_orphaned(session, worker="host1-1").failed == [a.id]
     got = jobs.get(session, a.id)
     assert (got.status, got.error) == (JobStatus.FAILED, "the worker stopped before the job finished")
+    assert got.stage == jobs.FINISHED_STAGE
     assert jobs.reap_orphaned(session).failed == [b.id]
     assert jobs.reap_orphaned(session).failed == []
     assert jobs.get(session, c.id).status == JobStatus.SUCCEEDED
     assert jobs.get(session, queued.id).status == JobStatus.QUEUED
-    assert jobs.retry(session, a.id).status == JobStatus.QUEUED
+    assert (jobs.retry(session, a.id).status, jobs.get(session, a.id).stage) == (JobStatus.QUEUED, "")
 
 
 def test_set_config(session: Session, job: Job) -> None:
@@ -312,3 +314,19 @@ def test_discard_results(session: Session, job: Job) -> None:
     with pytest.raises(NotFound):
         metrics.get_run_metrics(session, job.id)
     assert metrics.get_frame_stats(session, job.id) == []
+
+
+def test_every_way_of_ending_sets_the_final_stage(session: Session, job: Job) -> None:
+    jobs.claim(session, job.id, "w")
+    jobs.update_progress(session, job.id, stage="saving", frames_done=5, frames_total=5)
+    assert jobs.finish(session, job.id, "failed", error="disk full").stage == jobs.FINISHED_STAGE
+    queued = jobs.create(session, sequence_id=job.sequence_id, preset="orb-only")
+    assert jobs.request_cancel(session, queued.id).stage == jobs.FINISHED_STAGE
+
+
+def test_timings_in_milliseconds_and_run_seconds_read_old_and_new_jobs() -> None:
+    assert jobs.timings_ms({"tracking": 3.0, "run_s": 1.5}) == {"tracking": 3.0, "run_ms": 1500.0}
+    assert jobs.timings_ms({"tracking": 3.0, "run_ms": 1500.0}) == {"tracking": 3.0, "run_ms": 1500.0}
+    assert jobs.timings_ms(None) == {}
+    assert jobs.run_seconds({"run_ms": 1500.0}) == 1.5 and jobs.run_seconds({"run_s": 2.25}) == 2.25
+    assert jobs.run_seconds({}) is None and jobs.run_seconds({"run_ms": "x"}) is None

@@ -9,6 +9,7 @@ import pytest
 
 from formats.catalog import PipelinePreset, StageContract
 from formats.ply import read_ply
+from formats.version import PROVENANCE_KEYS, provenance
 from tests.worker.slam.synthetic_room import trajectory, write_sequence
 from worker.slam.camera import PRESETS
 from worker.slam.catalog import Catalog, CatalogStage, shipped_catalog
@@ -39,8 +40,10 @@ def test_run_writes_all_outputs_and_tracks_to_subcentimetre(room_seq, tmp_path):
     assert len(read_tum_trajectory(tmp_path / "trajectory.txt")) == 40
     xyz, rgb = read_ply(tmp_path / "map.ply")
     assert len(xyz) == m["dense_points"] > 1000
-    cfg = shipped_catalog().config_from_dict(json.loads((tmp_path / "config.json").read_text()))
+    snapshot = json.loads((tmp_path / "config.json").read_text())
+    cfg = shipped_catalog().config_from_dict(snapshot)  # the code's version and commit are skipped
     assert cfg.to_dict() == get_preset("orb-only").to_dict()
+    assert {k: snapshot[k] for k in PROVENANCE_KEYS} == {k: m[k] for k in PROVENANCE_KEYS} == provenance()
     assert calls[0] == (1, 40, "tracking") and calls[-1][2] == "writing"
     assert res.tracked.all()
 

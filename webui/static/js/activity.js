@@ -1,7 +1,7 @@
 /* The first page's runs: what is running or waiting now, and what just finished, each linked to its page. */
 "use strict";
 (() => {
-  const { api, el, showError, metres, seconds, when, jobDuration, TERMINAL, statusBadge, isNum } = VTD;
+  const { api, el, showError, metres, seconds, when, jobDuration, TERMINAL, statusBadge, isNum, etaText } = VTD;
   const $ = (id) => document.getElementById(id);
   const RECENT = 5;
   const names = new Map();
@@ -16,7 +16,7 @@
   function activeItem(job) {
     const pct = Math.round(100 * (job.progress || 0));
     const state = job.status === "queued" ? "waiting for a worker"
-      : `${pct} % · ${job.stage || "starting"}${isNum(job.eta_s) ? ` · about ${seconds(job.eta_s)} left` : ""}`;
+      : `${pct} % · ${job.stage || "starting"}${etaText(job) ? ` · ${etaText(job)}` : ""}`;
     return el("li", { "data-job": job.id },
       el("a", { href: "/jobs/" + job.id }, el("b", {}, seqName(job)), " · ", job.preset), " ", statusBadge(job.status),
       job.status === "running" ? el("progress", { max: 1, value: job.progress || 0 }) : null,

@@ -129,11 +129,20 @@ const VTD = (() => {
   const statusBadge = (s) => el("span", { class: "badge st-" + s }, s);
   const shortId = (id) => el("code", { class: "id", title: id }, id.slice(0, 8));
 
+  /** What is left of a running job: "about 12 s left" while frames are tracked (the api's eta_s: the frames
+   *  left at the rate so far), "frames done, finishing…" once they are (dense map, evaluation, saving: no
+   *  estimate, rather than "0.0 s left" for as long as they take); "" otherwise. */
+  function etaText(job) {
+    if (job.status !== "running") return "";
+    if (job.frames_total > 0 && job.frames_done >= job.frames_total) return "frames done, finishing…";
+    return isNum(job.eta_s) ? `about ${seconds(job.eta_s)} left` : "";
+  }
+
   function progressCell(job) {
     if (job.status === "succeeded") return document.createTextNode(`${job.frames_total} frames`);
     if (job.status === "queued") return document.createTextNode("waiting for a worker");
     if (job.status !== "running") return document.createTextNode(job.frames_total ? `stopped at frame ${job.frames_done} of ${job.frames_total}` : "");
-    const eta = isNum(job.eta_s) ? ", about " + seconds(job.eta_s) + " left" : "";
+    const eta = etaText(job) ? ", " + etaText(job) : "";
     return el("span", {}, el("progress", { max: 1, value: job.progress || 0 }), " ",
       el("span", { class: "num small" }, `${Math.round(100 * (job.progress || 0))} % · ${job.stage || ""} · ${job.frames_done}/${job.frames_total} frames${eta}`));
   }
@@ -159,6 +168,36 @@ const VTD = (() => {
     return () => { stopped = true; if (es) es.close(); clearTimeout(timer); };
   }
 
+  /**
+   * Wide tables scroll sideways inside their card (.scroll); where one does not fit, say so: a "scroll sideways"
+   * note above it and a fade at the edge still hiding columns (classes overflowing / at-end). Kept up to date
+   * as rows arrive, the window resizes and the table is scrolled; hidden again when the table fits.
+   */
+  function scrollHints() {
+    const hints = new Map();
+    const update = (box) => {
+      const hint = hints.get(box);
+      const over = box.scrollWidth > box.clientWidth + 1;
+      box.classList.toggle("overflowing", over);
+      box.classList.toggle("at-end", over && box.scrollLeft + box.clientWidth >= box.scrollWidth - 1);
+      if (hint) hint.hidden = !over;
+    };
+    const boxOf = (n) => (n instanceof Element ? n : n.parentElement)?.closest(".scroll");
+    const sized = new ResizeObserver((entries) => { for (const e of entries) { const b = boxOf(e.target); if (b) update(b); } });
+    const changed = new MutationObserver((records) => { for (const b of new Set(records.map((r) => boxOf(r.target)))) if (b) update(b); });
+    for (const box of document.querySelectorAll(".scroll")) {
+      const hint = el("div", { class: "scroll-hint", "aria-hidden": "true", hidden: true }, "scroll sideways for more →");
+      box.before(hint);
+      hints.set(box, hint);
+      box.addEventListener("scroll", () => update(box), { passive: true });
+      sized.observe(box);
+      for (const child of box.children) sized.observe(child); // the table widens as its rows arrive
+      changed.observe(box, { childList: true, subtree: true, characterData: true, attributes: true, attributeFilter: ["hidden"] });
+      update(box);
+    }
+  }
+  if ("ResizeObserver" in window && "MutationObserver" in window) scrollHints();
+
   return { API, ApiError, api, showError, toast, el, num, metres, bytes, seconds, when, jobDuration, TERMINAL,
-    statusBadge, shortId, progressCell, followJob, authHeaders, askToken, errorFrom, isNum };
+    statusBadge, shortId, progressCell, etaText, followJob, authHeaders, askToken, errorFrom, isNum };
 })();

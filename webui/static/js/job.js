@@ -1,7 +1,7 @@
 /* Job page: live progress, metrics table, SVG plots drawn here (no libraries), previews, downloads, 3D viewer. */
 "use strict";
 (() => {
-  const { api, el, showError, num, metres, bytes, seconds, when, jobDuration, TERMINAL, statusBadge, followJob, isNum } = VTD;
+  const { api, el, showError, num, metres, bytes, seconds, when, jobDuration, TERMINAL, statusBadge, followJob, isNum, etaText } = VTD;
   const { parseTum, parseCsv, lineChart, barChart, note } = VTDPlot;
   const $ = (id) => document.getElementById(id);
   const jobId = document.getElementById("main").dataset.jobId;
@@ -23,6 +23,12 @@
       ["Worker", job.worker || "—"],
     ];
     if (m.device) items.push(["Device", m.device]);
+    // the code that produced the figures (metrics.json's version and git commit; older runs have neither)
+    if (typeof m.version === "string") {
+      const commit = typeof m.commit === "string" ? m.commit : "";
+      items.push(["Code version", el("span", { id: "code-version", title: commit ? "git commit " + commit : "not run from a git checkout" },
+        commit ? `${m.version} · commit ${commit.slice(0, 12)}` : m.version)]);
+    }
     if (job.batch_id) items.push(["Batch", el("a", { href: "/batches/" + job.batch_id }, job.batch_id.slice(0, 8))]);
     $("facts").replaceChildren(...items.map(([k, v]) => el("div", {}, el("dt", {}, k), el("dd", {}, v))));
     $("job-status").replaceChildren(statusBadge(job.status));
@@ -30,7 +36,7 @@
     $("job-progress").hidden = !running;
     if (running) {
       $("job-bar").value = job.progress || 0;
-      const eta = isNum(job.eta_s) ? ` · about ${seconds(job.eta_s)} left` : "";
+      const eta = etaText(job) ? ` · ${etaText(job)}` : "";
       $("job-progress-text").textContent = job.status === "queued" ? "waiting for a worker"
         : `${Math.round(100 * (job.progress || 0))} % · ${job.stage}${eta}`;
     }
@@ -209,10 +215,24 @@
     performance.mark("vtd-plots-drawn"); // read by the browser test (time until the plots are on screen)
   }
 
+  // A frame's previews (formats.artifacts.frame_image: frame_000012_rgb.jpg) in the order a reader follows them:
+  // the input, the mask culled from it, the frame restored behind it; by frame, unknown kinds last by name.
+  const PREVIEW_KINDS = ["rgb", "mask", "restored"];
+  function previewKey(name) {
+    const m = /^frame_(\d+)_([a-z]+)\./.exec(name);
+    if (!m) return [Infinity, PREVIEW_KINDS.length, name];
+    const k = PREVIEW_KINDS.indexOf(m[2]);
+    return [+m[1], k < 0 ? PREVIEW_KINDS.length : k, name];
+  }
+  const byPreviewOrder = (a, b) => {
+    const [x, y] = [previewKey(a.name), previewKey(b.name)];
+    return x[0] - y[0] || x[1] - y[1] || (x[2] < y[2] ? -1 : x[2] > y[2] ? 1 : 0);
+  };
+
   function previews(images) {
     if (!images.length) return;
     $("previews-card").hidden = false;
-    $("previews").replaceChildren(...images.map((a) => el("figure", {},
+    $("previews").replaceChildren(...[...images].sort(byPreviewOrder).map((a) => el("figure", {},
       el("a", { href: a.url, target: "_blank" }, el("img", { src: a.url, alt: a.name, loading: "lazy" })),
       el("figcaption", {}, a.name.replace(/\.(png|jpe?g)$/i, "").replace(/_/g, " ")))));
   }

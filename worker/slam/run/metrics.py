@@ -5,6 +5,7 @@ import resource
 
 import numpy as np
 
+from formats.version import provenance
 from worker.slam.camera import Camera
 from worker.slam.run.frame_log import FrameLog
 from worker.slam.run.parts import SlamParts
@@ -13,7 +14,8 @@ from worker.slam.run.timer import StageTimer
 
 def run_metrics(log: FrameLog, parts: SlamParts, timer: StageTimer, *, loop_s: float, frames_refit: int,
                 overlapped: set[str], dense_points: int, camera: Camera, preset: str, start: int) -> dict:
-    """The 28 run-level entries of metrics.json; the stages' summaries and the evaluation follow them.
+    """The 28 run-level entries of metrics.json, then the code's version and git commit (`formats.version`);
+    the stages' summaries and the evaluation follow them.
 
     `loop_s`: wall time of the frame loop (s); `frames_refit`: frames re-solved against the final map;
     `overlapped`: stages whose work ran ahead on another thread; `dense_points`: points in map.ply."""
@@ -39,6 +41,7 @@ def run_metrics(log: FrameLog, parts: SlamParts, timer: StageTimer, *, loop_s: f
         "camera": camera.to_dict(), "preset": preset, "start": start,
         "tracked_fraction": round(float(tracked.mean()), 4) if total else None,
         "warnings": lost_warnings(tracked, start),
+        **provenance(),
     }
 
 

@@ -11,13 +11,15 @@ from formats import artifacts
 from formats.frame_stats import write_frame_stats
 from formats.ply import write_ply
 from formats.run_metrics import RunMetrics, write_run_metrics
+from formats.version import provenance
 from worker.slam.config import PipelineConfig
 from worker.slam.io.trajectory import write_tum_trajectory
 from worker.slam.run.result import RunResult
 
 
 def write_outputs(result: RunResult, config: PipelineConfig, out: Path) -> None:
-    """trajectory.txt (the tracked frames' poses), keyframes.txt (TUM), map.ply, metrics.json, config.json, the
+    """trajectory.txt (the tracked frames' poses), keyframes.txt (TUM), map.ply, metrics.json, config.json (both
+    with the code's ``version`` and ``commit``), the
     aligned ground truth when there is one, the frame statistics and the preview images (JPEG)."""
     out.mkdir(parents=True, exist_ok=True)
     lost = int((~result.tracked).sum())
@@ -28,7 +30,8 @@ def write_outputs(result: RunResult, config: PipelineConfig, out: Path) -> None:
     xyz, rgb = result.cloud if result.cloud is not None else (np.zeros((0, 3)), np.zeros((0, 3), np.uint8))
     write_ply(out / artifacts.MAP, xyz, rgb)
     write_run_metrics(out / artifacts.METRICS, RunMetrics.from_dict(result.metrics))
-    (out / artifacts.CONFIG).write_text(json.dumps(config.to_dict(), indent=2))
+    # the config, then the code that ran it (`Catalog.config_from_dict` reads the file back, ignoring those two)
+    (out / artifacts.CONFIG).write_text(json.dumps({**config.to_dict(), **provenance()}, indent=2))
     if result.aligned_groundtruth is not None:
         write_tum_trajectory(out / artifacts.GROUNDTRUTH_ALIGNED, result.aligned_groundtruth,
                              header="ground truth T_WC aligned onto the estimate (SE(3) Umeyama)")

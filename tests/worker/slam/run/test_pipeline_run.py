@@ -19,7 +19,7 @@ RUN_KEYS = ["frames", "tracked", "lost", "relocalisations", "new_maps", "map_mer
             "rescued_frames", "last_pose_retries", "frames_refit", "keyframes", "map_points", "fused_observations",
             "loops", "loops_applied", "fps", "tracking_fps", "tracking_cpu_ms", "timings_ms", "overlapped_stages",
             "dense_points", "stage_info", "peak_rss_mb", "camera", "preset", "start", "tracked_fraction",
-            "warnings"]
+            "warnings", "version", "commit"]
 
 
 @pytest.fixture(scope="module")
