@@ -108,6 +108,8 @@ def test_csv_headers_carry_units() -> None:
     from storage.repositories.batches import csv_header
 
     got = [csv_header(c) for c in ("sequence_id", "ate_rmse", "rpe_trans_rmse", "rpe_rot_rmse", "fps", "mask_iou",
-                                   "restoration_psnr", "ate_rmse_corrected", "ate_rmse_m")]
+                                   "restoration_psnr", "ate_corrected_rmse", "rpe_frame_trans_rmse",
+                                   "rpe_frame_rot_rmse", "ate_against", "rpe_against", "groundtruth_frame")]
     assert got == ["sequence_id", "ate_rmse_m", "rpe_trans_rmse_m", "rpe_rot_rmse_deg", "fps", "mask_iou",
-                   "restoration_psnr_db", "ate_rmse_corrected_m", "ate_rmse_m"]
+                   "restoration_psnr_db", "ate_corrected_rmse_m", "rpe_frame_trans_rmse_m", "rpe_frame_rot_rmse_deg",
+                   "ate_against", "rpe_against", "groundtruth_frame"]
