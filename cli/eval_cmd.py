@@ -3,9 +3,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
+
+if TYPE_CHECKING:
+    from worker.slam.evaluation.metrics import EvalResult
 
 _RPE_MODES = ("all-pairs", "fixed-delta")
 
@@ -28,6 +31,9 @@ def eval_command(
         help="Evaluate at most this many pose pairs, sampled with a fixed seed (the script's --max_pairs; its "
              "default 10000 makes its all-pairs figures random); 0 = every pair. All pairs of N poses hold N^2 "
              "errors: bound it for trajectories of many thousand poses.")] = 0,
+    plot: Annotated[Path | None, typer.Option(
+        "--plot", help="Also write figures (PNG) into this folder: the top view and x/y/z over time of the "
+                       "estimate against the aligned ground truth, and the error per pose over time.")] = None,
 ) -> None:
     """ATE (SE(3)-aligned, no scale, as TUM evaluate_ate, via evo) and RPE as TUM evaluate_rpe."""
     from worker.slam.evaluation.metrics import RpeMode, evaluate
@@ -39,11 +45,21 @@ def eval_command(
         raise typer.BadParameter("must be positive", param_hint="--rpe-delta")
     if rpe_max_pairs < 0:
         raise typer.BadParameter("must be 0 (every pair) or positive", param_hint="--rpe-max-pairs")
-    result = evaluate(read_tum_trajectory(groundtruth), read_tum_trajectory(estimate), max_diff, rpe_delta,
-                      RpeMode(rpe_mode), rpe_max_pairs)
+    est = read_tum_trajectory(estimate)
+    result = evaluate(read_tum_trajectory(groundtruth), est, max_diff, rpe_delta, RpeMode(rpe_mode), rpe_max_pairs)
     if as_json:
         typer.echo(json.dumps(result.to_dict(), indent=2))
-        return
+    else:
+        _print(result, rpe_delta, rpe_max_pairs)
+    if plot is not None:
+        from worker.slam.evaluation.plots import write_figures
+
+        written = write_figures(plot, est, result.aligned_groundtruth,
+                                (result.matched_timestamps, result.ate_errors), title=estimate.stem)
+        typer.echo(f"figures: {', '.join(str(p) for p in written)}", err=as_json)  # stdout stays JSON
+
+
+def _print(result: EvalResult, rpe_delta: float, rpe_max_pairs: int) -> None:
     typer.echo(f"matched poses        {result.matched}")
     a = result.ate
     typer.echo(f"ATE  (m)             rmse {a.rmse:.4f}  mean {a.mean:.4f}  median {a.median:.4f}  "

@@ -23,6 +23,17 @@ LOG = "log.txt"
 PREVIEW = "preview.png"
 """The top view of the trajectory the dashboard shows before the 3D viewer loads."""
 
+PLOT_TRAJECTORY_TOP = "plot_trajectory_top.png"
+"""Figure: the estimate (and the aligned ground truth) seen from above, the x-z plane."""
+PLOT_XYZ = "plot_xyz.png"
+"""Figure: x, y and z over time, estimate against aligned ground truth."""
+PLOT_ATE_ERROR = "plot_ate_error.png"
+"""Figure: the absolute trajectory error per pose over time (only with ground truth)."""
+PLOT_TIMINGS = "plot_timings.png"
+"""Figure: mean time per pipeline stage."""
+FIGURES = (PLOT_TRAJECTORY_TOP, PLOT_XYZ, PLOT_ATE_ERROR, PLOT_TIMINGS)
+"""The figures a run (``vtdslam run``, a job) and ``vtdslam eval --plot`` write, those that have data."""
+
 PIPELINE_OUTPUTS = (TRAJECTORY, KEYFRAMES, MAP, METRICS, CONFIG)
 """What every pipeline run writes (``vtdslam run`` and a job alike)."""
 

@@ -14,10 +14,19 @@ def test_import_contracts_hold() -> None:
 
 def test_api_process_does_not_import_heavy_modules() -> None:
     code = ("import sys; from backend.app import create_app; "
-            "bad = [m for m in ('torch', 'cv2', 'worker', 'evo') if m in sys.modules]; print(bad)")
+            "bad = [m for m in ('torch', 'cv2', 'worker', 'evo', 'matplotlib') if m in sys.modules]; print(bad)")
     res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "[]"
+
+
+def test_the_pipeline_imports_matplotlib_only_to_draw() -> None:
+    """The figures' plotting library is imported when a run draws them, not by importing the pipeline."""
+    code = ("import sys; import worker.slam.pipeline, worker.slam.evaluation.plots, worker.tasks; "
+            "print('matplotlib' in sys.modules)")
+    res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "False"
 
 
 def test_pure_pipeline_imports_only_itself() -> None:

@@ -45,7 +45,7 @@ def content_type(name: str) -> str:
 @router.get("/{job_id}/artifacts", response_model=list[ArtifactOut], responses=error_responses(404, 500))
 def list_artifacts(job_id: JobId, session: SessionDep, store: StoreDep) -> list[ArtifactOut]:
     """The job's finished outputs (trajectory.txt, keyframes.txt, map.ply, metrics.json, config.json,
-    frame_stats.csv, log.txt, preview.png)."""
+    frame_stats.csv, log.txt, preview.png, the figures plot_*.png and the frames' preview images)."""
     jobs.get(session, job_id)
     return [
         ArtifactOut(

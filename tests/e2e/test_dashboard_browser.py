@@ -259,6 +259,8 @@ def test_dashboard_flow(page, js_errors: list[str], service: ServiceProcesses, a
     expect(page.locator("#plot-ate")).not_to_be_empty()  # a plot, or a sentence saying why there is none
     expect(page.locator("#downloads")).to_contain_text("trajectory.txt")
     expect(page.locator("#downloads")).to_contain_text("map.ply")
+    expect(page.locator('#figures img[src$="/plot_trajectory_top.png"]')).to_be_visible()  # the run's figures
+    assert not page.locator('#previews img[src*="/plot_"]').count()  # not among the frames
     _shot(page, shots, "05_job")
 
     # --- the 3D viewer, embedded and opened on this run ---

@@ -173,7 +173,10 @@
     "config.json": "full pipeline configuration used",
     "frame_stats.csv": "per-frame statistics", "groundtruth_aligned.txt": "ground truth in the estimate's frame",
     "log.txt": "the worker's log of this run", "preview.png": "trajectory sketch (top view)",
+    "plot_trajectory_top.png": "figure: trajectory, top view", "plot_xyz.png": "figure: x, y, z over time",
+    "plot_ate_error.png": "figure: error per pose over time", "plot_timings.png": "figure: time per stage",
   };
+  const isFigure = (name) => /^plot_[a-z0-9_]+\.png$/.test(name); // formats.artifacts.FIGURES
 
   async function results(job) {
     let artifacts = [];
@@ -193,7 +196,8 @@
       barChart($("plot-timing"), timings.map(([k, v]) => ({ label: k.replace(/_/g, " "), value: v })),
         { unit: "mean time per call (ms)", fmt: (v) => num(v, v < 10 ? 2 : 1) + " ms", ariaLabel: "time per stage" });
     } else note($("plot-timing"), "This run recorded no stage timings.");
-    previews(artifacts.filter((a) => /\.(png|jpe?g)$/i.test(a.name) && a.name !== "preview.png")); // that one is a trajectory sketch
+    previews(artifacts.filter((a) => /\.(png|jpe?g)$/i.test(a.name) && a.name !== "preview.png" && !isFigure(a.name))); // that one is a trajectory sketch
+    figures(artifacts.filter((a) => isFigure(a.name)));
 
     const optional = (name, parse) => (names.has(name) ? fetchText(name).then(parse, () => null) : Promise.resolve(null));
     let [est, gt, frames] = await Promise.all([ // in parallel: the plots appear after one round trip
@@ -235,6 +239,14 @@
     $("previews").replaceChildren(...[...images].sort(byPreviewOrder).map((a) => el("figure", {},
       el("a", { href: a.url, target: "_blank" }, el("img", { src: a.url, alt: a.name, loading: "lazy" })),
       el("figcaption", {}, a.name.replace(/\.(png|jpe?g)$/i, "").replace(/_/g, " ")))));
+  }
+
+  function figures(images) {
+    if (!images.length) return;
+    $("figures-card").hidden = false;
+    $("figures").replaceChildren(...images.map((a) => el("figure", {},
+      el("a", { href: a.url, target: "_blank" }, el("img", { src: a.url, alt: DESCRIBE[a.name] || a.name, loading: "lazy" })),
+      el("figcaption", {}, (DESCRIBE[a.name] || a.name).replace(/^figure: /, "")))));
   }
 
   function downloads(artifacts) {
