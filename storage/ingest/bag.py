@@ -474,7 +474,7 @@ def _convert(
                         tf_pair = tf_pair or pair
                         if pair != tf_pair:
                             continue
-                    gt_lines.append(f"{stamp:.6f} " + " ".join(f"{v:.9g}" for v in (*pos, *quat)))
+                    gt_lines.append(f"{stamp:.6f} " + " ".join(f"{v + 0.0:.9g}" for v in (*pos, *quat)))
         if not result.rgb_frames:
             raise InvalidInput(f"colour topic {rgb_topic!r} holds no images", {"topic": rgb_topic})
         if not result.depth_frames:
