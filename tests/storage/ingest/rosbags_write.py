@@ -179,3 +179,64 @@ def write_bag(path: Path, spec: BagSpec) -> Path:
                 conns[topic] = w2.add_connection(topic, typ, typestore=ts)
             w2.write(conns[topic], t_ns, ts.serialize_cdr(msg, typ))
     return path
+
+
+def folder_to_bag(src: Path, out: Path, n: int, depth_enc: str = "32FC1") -> Path:
+    """The first ``n`` colour frames of a TUM-layout folder (depth PNG at 5000/m, JPEG or PNG colour) as a ROS 1
+    bag: colour as CompressedImage (the file's own bytes), depth as ``depth_enc`` Image, ground truth as
+    PoseStamped on /groundtruth/pose; no CameraInfo (the caller's camera preset applies)."""
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    types = ts.types
+
+    def rows(name: str) -> list[list[str]]:
+        return [line.split() for line in (src / name).read_text().splitlines() if line.strip()
+                and not line.startswith("#")]
+
+    def stamp(s: str) -> Any:
+        sec, _, frac = s.partition(".")
+        return types["builtin_interfaces/msg/Time"](sec=int(sec), nanosec=int((frac + "000000000")[:9]))
+
+    def header(s: str, i: int, frame: str = "camera") -> Any:
+        return types["std_msgs/msg/Header"](seq=i, stamp=stamp(s), frame_id=frame)
+
+    def ns(s: str) -> int:
+        st = stamp(s)
+        return int(st.sec) * 1_000_000_000 + int(st.nanosec)
+
+    rgb = rows("rgb.txt")[:n]
+    t_end = float(rgb[-1][0]) + 0.1
+    msgs: list[tuple[str, str, int, Any]] = []
+    for i, (t, rel) in enumerate(rgb):
+        msgs.append(("/camera/rgb/image_color/compressed", "sensor_msgs/msg/CompressedImage", ns(t),
+                     types["sensor_msgs/msg/CompressedImage"](header=header(t, i), format="bgr8; jpeg compressed bgr8",
+                                                              data=np.frombuffer((src / rel).read_bytes(), np.uint8))))
+    for i, (t, rel) in enumerate(r for r in rows("depth.txt") if float(r[0]) <= t_end):
+        png = cv2.imread(str(src / rel), cv2.IMREAD_UNCHANGED)
+        assert png is not None, rel
+        h, w = png.shape
+        if depth_enc == "32FC1":
+            arr: np.ndarray = png.astype(np.float32) / np.float32(5000.0)
+            arr[png == 0] = np.nan
+        else:
+            arr = np.rint(png / 5.0).astype(np.uint16)
+        msgs.append(("/camera/depth/image", "sensor_msgs/msg/Image", ns(t), types["sensor_msgs/msg/Image"](
+            header=header(t, i), height=h, width=w, encoding=depth_enc, is_bigendian=0, step=w * arr.itemsize,
+            data=np.ascontiguousarray(arr).reshape(-1).view(np.uint8))))
+    for i, g in enumerate(r for r in rows("groundtruth.txt") if float(r[0]) <= t_end):
+        v = [float(x) for x in g[1:8]]
+        pose = types["geometry_msgs/msg/Pose"](
+            position=types["geometry_msgs/msg/Point"](x=v[0], y=v[1], z=v[2]),
+            orientation=types["geometry_msgs/msg/Quaternion"](x=v[3], y=v[4], z=v[5], w=v[6]))
+        msgs.append(("/groundtruth/pose", "geometry_msgs/msg/PoseStamped", ns(g[0]),
+                     types["geometry_msgs/msg/PoseStamped"](header=header(g[0], i, "world"), pose=pose)))
+    msgs.sort(key=lambda m: m[2])
+    with Writer1(out) as writer:
+        conns: dict[str, Any] = {}
+        for topic, typ, t_ns, msg in msgs:
+            if topic not in conns:
+                conns[topic] = writer.add_connection(topic, typ, typestore=ts)
+            writer.write(conns[topic], t_ns, ts.serialize_ros1(msg, typ))
+    return out
