@@ -80,6 +80,39 @@ class BagLimits:
     max_bytes: int | None = None
 
 
+MAGIC = {"ros1": b"#ROSBAG V2.0\n", "mcap": b"\x89MCAP0\r\n", "db3": b"SQLite format 3\x00"}
+"""What an uploaded file starts with when it is a bag: ROS 1 ``.bag``, ROS 2 ``.mcap``, ROS 2 ``.db3``."""
+
+
+def sniff_bag(path: Path) -> str | None:
+    """``ros1``, ``mcap`` or ``db3`` by magic bytes; None for anything else (an archive)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(16)
+    except OSError:
+        return None
+    return next((kind for kind, magic in MAGIC.items() if head.startswith(magic)), None)
+
+
+def find_bag_folder(folder: Path) -> Path | None:
+    """A ROS 2 bag folder (``metadata.yaml`` beside its .db3/.mcap files) at the top of an unpacked archive or
+    in its one top-level folder; None otherwise."""
+    if (folder / "metadata.yaml").is_file():
+        return folder
+    entries = [p for p in folder.iterdir() if not p.name.startswith(".") and p.name != "__MACOSX"]
+    if len(entries) == 1 and entries[0].is_dir() and (entries[0] / "metadata.yaml").is_file():
+        return entries[0]
+    return None
+
+
+def import_uploaded_bag(upload: Path, kind: str, out: Path, limits: BagLimits) -> BagImport:
+    """:func:`import_bag` of an uploaded file (stored without its name) that :func:`sniff_bag` called ``kind``;
+    the reader tells ROS 2's storages apart by suffix, so the file is renamed to carry one."""
+    if kind in ("mcap", "db3"):
+        upload = upload.rename(upload.with_name(f"{upload.name}.{kind}"))
+    return import_bag(upload, out, limits=limits)
+
+
 def is_ros1_bag(path: Path) -> bool:
     """Whether ``path`` starts with ROS 1's ``#ROSBAG V2.0`` magic."""
     try:
@@ -138,11 +171,12 @@ def _open_reader(bag: Path) -> Any:
     if ros1 and not is_ros1_bag(bag):
         raise InvalidInput(f"{bag.name} is not a ROS bag: no '#ROSBAG V2.0' header (ROS 1), and not a ROS 2 "
                            ".db3/.mcap file or bag folder", {"file": bag.name})
-    # AnyReader picks ROS 1 by the .bag suffix: a ROS 1 bag under another name is read through a link
+    # AnyReader picks ROS 1 by the .bag suffix: a ROS 1 bag under another name (or a ROS 2 folder named
+    # *.bag) is read through a link
     path = bag
-    if ros1 and bag.suffix != ".bag":
+    if ros1 != (bag.suffix == ".bag"):
         link_dir = Path(tempfile.mkdtemp(prefix="vtd-bag-"))
-        path = link_dir / "input.bag"
+        path = link_dir / ("input.bag" if ros1 else "input")
         os.symlink(bag.resolve(), path)
     store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.LATEST)
     reader = AnyReader([path], default_typestore=store)

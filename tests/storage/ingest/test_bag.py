@@ -178,6 +178,11 @@ def test_ros1_bag_under_another_name(tmp_path):
     assert import_bag(renamed, tmp_path / "seq").frames == 4
 
 
+def test_ros2_folder_named_like_a_ros1_bag(tmp_path):
+    folder = _bag(tmp_path, BagSpec(kind="mcap"), name="rec.bag")
+    assert folder.is_dir() and import_bag(folder, tmp_path / "seq").bag_format == "ros2"
+
+
 def test_out_exists_is_refused(tmp_path):
     bag = _bag(tmp_path, BagSpec(kind="ros1"))
     (tmp_path / "seq").mkdir()
