@@ -415,6 +415,7 @@ class _Writer:
         self.files = 0
         self.bytes = 0
         self.lists: dict[str, list[tuple[float, str]]] = {"rgb": [], "depth": []}
+        self.skipped = {"rgb": 0, "depth": 0}
         (root / "rgb").mkdir()
         (root / "depth").mkdir()
 
@@ -433,15 +434,17 @@ class _Writer:
 
         listed = self.lists[kind]
         name = f"{t:.6f}"
-        if listed and (t <= listed[-1][0] or listed[-1][1].endswith(f"/{name}{suffix}")):
-            return False  # a repeated or out-of-order stamp: TUM lists strictly increase
+        if listed and (t <= listed[-1][0] or listed[-1][1] == f"{kind}/{name}{suffix}"):
+            self.skipped[kind] += 1  # a repeated or out-of-order stamp: TUM lists strictly increase
+            return False
+        if not isinstance(payload, bytes):
+            ok, encoded = cv2.imencode(suffix, payload)
+            if not ok:
+                raise StorageError(f"could not encode a {kind} image as {suffix}")
+            payload = encoded.tobytes()
         rel = f"{kind}/{name}{suffix}"
-        path = self.root / rel
-        if isinstance(payload, bytes):
-            path.write_bytes(payload)
-        elif not cv2.imwrite(str(path), payload):
-            raise StorageError(f"could not write {rel}")
-        self._count(path.stat().st_size)
+        self._count(len(payload))
+        (self.root / rel).write_bytes(payload)  # OSError (a full disk) passes through: the caller maps it
         listed.append((t, rel))
         return True
 
@@ -514,6 +517,10 @@ def _convert(
         if not result.depth_frames:
             raise InvalidInput(f"depth topic {depth_topic!r} holds no images", {"topic": depth_topic})
         writer.write_lists()
+        for kind, n in writer.skipped.items():
+            if n:
+                result.notes.append(f"{n} {kind} images skipped: their header stamp repeats or precedes the one "
+                                    "before (TUM lists strictly increase)")
         if far:
             result.notes.append(f"{far} depth pixels beyond {MAX_DEPTH_M:.3f} m were marked invalid (0)")
         if result.camera is not None:

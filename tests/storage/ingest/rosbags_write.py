@@ -26,6 +26,7 @@ class BagSpec:
     gt: str | None = None  # pose | transform | tf
     rgb_topic: str = "/camera/rgb/image_raw"
     depth_topic: str = "/camera/depth_registered/image_raw"
+    repeat_stamp: int | None = None  # this frame's colour image carries the previous frame's header stamp
 
 
 def colour_frame(i: int) -> np.ndarray:
@@ -56,8 +57,9 @@ def _header(ts: Any, ros1: bool, i: int, frame: str = "camera", offset_ns: int =
     return hdr(seq=i, stamp=stamp, frame_id=frame) if ros1 else hdr(stamp=stamp, frame_id=frame)
 
 
-def _colour_msg(ts: Any, ros1: bool, i: int, enc: str) -> tuple[str, Any]:
+def _colour_msg(ts: Any, ros1: bool, i: int, enc: str, stamp_of: int | None = None) -> tuple[str, Any]:
     rgb = colour_frame(i)
+    i = i if stamp_of is None else stamp_of
     if enc in ("jpeg", "png"):
         ok, buf = cv2.imencode("." + ("jpg" if enc == "jpeg" else "png"), rgb[..., ::-1])
         assert ok
@@ -148,7 +150,7 @@ def write_bag(path: Path, spec: BagSpec) -> Path:
     msgs: list[tuple[str, str, int, Any]] = []  # topic, type, time ns, message
     for i in range(spec.frames):
         t_ns = T0 * 1_000_000_000 + i * 33_333_333
-        typ, msg = _colour_msg(ts, ros1, i, spec.colour)
+        typ, msg = _colour_msg(ts, ros1, i, spec.colour, i - 1 if i == spec.repeat_stamp else None)
         msgs.append((spec.rgb_topic, typ, t_ns, msg))
         if spec.depth:
             typ, msg = _depth_msg(ts, ros1, i, spec.depth)

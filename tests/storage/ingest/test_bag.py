@@ -112,6 +112,14 @@ def test_topics_named_by_flags(tmp_path):
     assert not (tmp_path / "bad").exists()
 
 
+def test_repeated_stamp_is_skipped_and_said(tmp_path):
+    out = tmp_path / "seq"
+    result = import_bag(_bag(tmp_path, BagSpec(kind="ros1", frames=5, repeat_stamp=2)), out)
+    assert (result.rgb_frames, result.depth_frames) == (4, 5)
+    assert any("1 rgb images skipped" in n for n in result.notes)
+    assert len(Sequence(out)) == 4
+
+
 def test_no_camera_info_writes_no_camera_json(tmp_path):
     out = tmp_path / "seq"
     result = import_bag(_bag(tmp_path, BagSpec(kind="ros1", info=False)), out)
