@@ -408,6 +408,11 @@ def _pose(msg: Any, msgtype: str) -> tuple[list[float], list[float]]:
 # --- converting ----------------------------------------------------------------------------------------------
 
 
+def _write(path: Path, data: bytes) -> None:
+    """One image file; an OSError (a full disk) passes through: the upload maps it to a 507."""
+    path.write_bytes(data)
+
+
 class _Writer:
     def __init__(self, root: Path, limits: BagLimits) -> None:
         self.root = root
@@ -444,7 +449,7 @@ class _Writer:
             payload = encoded.tobytes()
         rel = f"{kind}/{name}{suffix}"
         self._count(len(payload))
-        (self.root / rel).write_bytes(payload)  # OSError (a full disk) passes through: the caller maps it
+        _write(self.root / rel, payload)
         listed.append((t, rel))
         return True
 

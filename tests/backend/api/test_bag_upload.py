@@ -2,6 +2,7 @@
 converted under the upload's limits; a bad bag is a 4xx that leaves no file and no row."""
 from __future__ import annotations
 
+import errno
 import json
 
 import pytest
@@ -69,3 +70,16 @@ def test_bag_past_the_file_limit_is_413(client, settings, tmp_path):
     r = upload(client, data, filename="rec.bag")
     assert r.status_code == 413, r.text
     assert leftovers(settings) == [] and json.loads(r.text)["error"]["detail"] == {"max_files": 5}
+
+
+def test_full_disk_while_converting_is_507(client, settings, tmp_path, monkeypatch):
+    from storage.ingest import bag as bag_module
+
+    def full(*_args: object) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(bag_module, "_write", full)
+    r = upload(client, write_bag(tmp_path / "rec.bag", BagSpec(kind="ros1")).read_bytes(), filename="rec.bag")
+    assert r.status_code == 507, r.text
+    assert r.json()["error"]["code"] == "insufficient_storage"
+    assert leftovers(settings) == [] and client.get("/api/v1/sequences").json()["total"] == 0
