@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import shutil
 import struct
 import tempfile
@@ -115,11 +116,7 @@ def import_uploaded_bag(upload: Path, kind: str, out: Path, limits: BagLimits) -
 
 def is_ros1_bag(path: Path) -> bool:
     """Whether ``path`` starts with ROS 1's ``#ROSBAG V2.0`` magic."""
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(13) == b"#ROSBAG V2.0\n"
-    except OSError:
-        return False
+    return sniff_bag(path) == "ros1"
 
 
 def import_bag(
@@ -158,7 +155,8 @@ def import_bag(
 
 
 def _bag_error(bag: Path, exc: BaseException) -> InvalidInput:
-    text = str(exc).strip() or type(exc).__name__
+    # the reader's messages name files by absolute path: keep their names, never the server's folders
+    text = re.sub(r"(?<![\w.])/(?:[^\s'\"/]+/)+", "", str(exc)).strip() or type(exc).__name__
     return InvalidInput(f"{bag.name} is not a readable ROS bag (truncated or corrupt?): {text[:300]}",
                         {"file": bag.name, "reason": type(exc).__name__})
 

@@ -61,7 +61,18 @@ def test_bad_bag_leaves_nothing(client, settings, tmp_path, spec, cut, message):
     assert r.status_code == 422, r.text
     err = r.json()["error"]
     assert err["code"] == "invalid_input" and message in err["message"]
+    assert str(settings.data_dir) not in r.text and "/tmp" not in r.text  # no server paths in the answer
     assert leftovers(settings) == [] and client.get("/api/v1/sequences").json()["total"] == 0
+
+
+def test_zip_of_a_broken_ros2_folder(client, settings, tmp_path):
+    folder = write_bag(tmp_path / "rec", BagSpec(kind="mcap"))
+    (folder / "metadata.yaml").write_text("rosbag2_bagfile_information: {version: 9, relative_file_paths: [x.mcap]}")
+    r = upload(client, zip_of(folder, tmp_path / "rec.zip", top="rec").read_bytes(), filename="rec.zip")
+    assert r.status_code == 422, r.text
+    assert "not a readable ROS bag" in r.json()["error"]["message"]
+    assert str(settings.data_dir) not in r.text and "/tmp" not in r.text
+    assert leftovers(settings) == []
 
 
 def test_bag_past_the_file_limit_is_413(client, settings, tmp_path):
