@@ -10,6 +10,7 @@ from cli import (
     demo_cmd,
     eval_cmd,
     fetch_cmd,
+    import_bag_cmd,
     inspect_cmd,
     msnet_cmd,
     run_cmd,
@@ -44,8 +45,8 @@ def _options(
     """VTD-SLAM: dynamic-scene RGB-D SLAM service, pipeline and tools."""
 
 
-for module in (augment_cmd, demo_cmd, eval_cmd, fetch_cmd, inspect_cmd, msnet_cmd, run_cmd, serve_cmd, synth_cmd,
-               viewer_cmd, worker_cmd):
+for module in (augment_cmd, demo_cmd, eval_cmd, fetch_cmd, import_bag_cmd, inspect_cmd, msnet_cmd, run_cmd, serve_cmd,
+               synth_cmd, viewer_cmd, worker_cmd):
     module.register(app)
 
 

@@ -40,7 +40,9 @@ _UPLOAD_BODY = {
                         "file": {
                             "type": "string",
                             "format": "binary",
-                            "description": ".zip or .tar.gz/.tgz of a TUM-layout folder (or of its contents)",
+                            "description": ".zip or .tar.gz/.tgz of a TUM-layout folder (or of its contents); or a "
+                            "ROS bag: a ROS 1 .bag, a ROS 2 .mcap or .db3 file, or a .zip/.tar.gz of a ROS 2 bag "
+                            "folder (metadata.yaml beside its files), converted with its topics found automatically",
                         },
                         "camera": {
                             "type": "string",
@@ -60,7 +62,7 @@ _UPLOAD_BODY = {
         },
     }
 }
-_ARCHIVE_SUFFIX = re.compile(r"(\.tar\.gz|\.tgz|\.zip|\.tar)$", re.IGNORECASE)
+_ARCHIVE_SUFFIX = re.compile(r"(\.tar\.gz|\.tgz|\.zip|\.tar|\.bag|\.mcap|\.db3)$", re.IGNORECASE)
 
 
 _TRUE, _FALSE = {"true", "1", "yes", "on"}, {"false", "0", "no", "off", ""}
@@ -98,6 +100,10 @@ async def upload_sequence(
     request: Request, session: SessionDep, store: StoreDep, settings: SettingsDep
 ) -> SequenceOut:
     """Stream the archive to disk, unpack it safely, validate the TUM layout and install it atomically.
+
+    A ROS bag (ROS 1 ``.bag``; ROS 2 ``.mcap`` or ``.db3`` file, or an archive of a ROS 2 bag folder) is
+    converted to that layout first (colour, depth and CameraInfo topics found automatically), under the same
+    limits.
 
     Rejected uploads leave nothing behind (no files, no row); so do uploads the client abandons.
     The same archive (SHA-256 of its bytes) a second time is a 409 unless ``allow_duplicate`` is true.

@@ -16,6 +16,7 @@ from storage.artifacts import ArtifactStore
 from storage.errors import InvalidInput, NotFound, StorageError
 from storage.faults import disk_full, insufficient_storage
 from storage.ingest.archive import Limits, find_root, remove_tree, unpack
+from storage.ingest.bag import BagLimits, find_bag_folder, import_bag, import_uploaded_bag, sniff_bag
 from storage.ingest.sequence import SequenceInfo, validate_sequence
 from storage.models import Sequence, new_id
 from storage.repositories import sequences
@@ -56,7 +57,10 @@ def ingest_staged(
     ``unique``: refuse (:class:`Conflict`) when another sequence already holds ``content_sha256``.
 
     ``staging`` holds ``archive`` (unpacked here into ``unpacked``) or, when the upload was unpacked
-    while it streamed in (:class:`storage.ingest.stream.ArchiveSink`), ``unpacked`` already.
+    while it streamed in (:class:`storage.ingest.stream.ArchiveSink`), ``unpacked`` already. A ROS bag
+    (a ROS 1 ``.bag``, a ROS 2 ``.mcap`` or ``.db3`` file, told by their magic bytes, or an archive of a ROS 2
+    bag folder with its ``metadata.yaml``) is converted into ``unpacked`` by :mod:`storage.ingest.bag` under
+    the same limits (topics found automatically; camera.json from its CameraInfo wins over ``camera``).
     ``staging`` is removed in every case; a failure leaves neither files nor a row behind.
     """
     seq_id = new_id()
@@ -64,10 +68,22 @@ def ingest_staged(
     try:
         unpacked = staging / "unpacked"
         archive = staging / "archive"
-        if archive.exists():
+        limits = upload_limits(settings)
+        bag_limits = BagLimits(max_files=limits.max_files, max_bytes=limits.max_bytes)
+        bag_kind = sniff_bag(archive) if archive.exists() else None
+        if bag_kind is not None:
+            import_uploaded_bag(archive, bag_kind, unpacked, bag_limits)
+            for leftover in staging.glob("archive*"):
+                leftover.unlink()  # free the space before validating
+        elif archive.exists():
             unpacked.mkdir()
-            unpack(archive, unpacked, upload_limits(settings))
+            unpack(archive, unpacked, limits)
             archive.unlink()  # free the space before validating
+        if not (unpacked / "rgb.txt").is_file() and (bag_folder := find_bag_folder(unpacked)) is not None:
+            converted = staging / "converted"
+            import_bag(bag_folder, converted, limits=bag_limits)
+            remove_tree(bag_folder)
+            unpacked = converted
         root = find_root(unpacked)
         info = validate_sequence(root, camera)
         installed = store.install_sequence(root, seq_id)

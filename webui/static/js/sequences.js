@@ -14,8 +14,8 @@
     label.textContent = chosen ? `${chosen.name} · ${bytes(chosen.size)}` : "";
     uploadBtn.disabled = !chosen;
     showError($("upload-error"), null);
-    if (chosen && !/\.(zip|tgz|tar\.gz|tar)$/i.test(chosen.name)) {
-      showError($("upload-error"), new Error(`"${chosen.name}" is not a .zip, .tar.gz or .tgz archive; the server will likely refuse it`));
+    if (chosen && !/\.(zip|tgz|tar\.gz|tar|bag|mcap|db3)$/i.test(chosen.name)) {
+      showError($("upload-error"), new Error(`"${chosen.name}" is not a .zip, .tar.gz or .tgz archive nor a ROS bag (.bag, .mcap, .db3); the server will likely refuse it`));
     }
   }
   fileInput.addEventListener("change", () => choose(fileInput.files[0]));
