@@ -35,8 +35,8 @@ class SmootherSettings:
     scales the measurements' information; `huber_accel` the Huber threshold of the prior's whitened residuals;
     `iterations` Gauss-Newton iterations."""
 
-    accel_sigma: float = 2.0
-    angular_sigma: float = 2.0
+    accel_sigma: float = 0.5
+    angular_sigma: float = 0.5
     pixel_sigma: float = 1.0
     huber_accel: float = 3.0
     iterations: int = 4
