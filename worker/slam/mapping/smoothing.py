@@ -1,11 +1,11 @@
 """Every frame's final pose smoothed under a constant-velocity motion prior, weighted by its covariance.
 
 Each tracked frame's pose, solved alone against the final map (`frame_refit`), is a measurement with a 6x6
-information matrix from its motion-only BA. That solve is well determined in most directions but not in one:
-a sideways shift of the camera and a rotation about the perpendicular axis move the image nearly alike, so
-with ~1-pixel keypoints (integer FAST corners, coarser at higher pyramid levels) a single frame's position
-carries several millimetres of noise along that direction, independently from frame to frame: measured on the
-synthetic room (exact truth) frame-to-frame RPE 7.9 mm against an ATE of 6.8 mm (docs/results/jitter.md).
+information matrix from its motion-only BA. With ~1-pixel keypoints (integer FAST corners, coarser at higher
+pyramid levels) a single frame's solve is good to about a millimetre along the optical axis, which depth pins,
+but only to several millimetres sideways (camera x and y, where a shift and a rotation move the image nearly
+alike), independently from frame to frame: on the synthetic room (exact truth) the frame-to-frame RPE was 7.9 mm
+against an ATE of 6.8 mm, and the scatter matched the solves' own covariances (docs/results/jitter.md).
 
 A hand-held camera's motion is smooth at 30 Hz, so all frames are solved together (a batch smoother): the
 measurement factors keep each frame near its own solve, weighted by that solve's information (so it moves
@@ -35,7 +35,7 @@ class SmootherSettings:
     scales the measurements' information; `huber_accel` the Huber threshold of the prior's whitened residuals;
     `iterations` Gauss-Newton iterations."""
 
-    accel_sigma: float = 0.5
+    accel_sigma: float = 0.15
     angular_sigma: float = 0.5
     pixel_sigma: float = 1.0
     huber_accel: float = 3.0
