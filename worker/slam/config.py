@@ -168,13 +168,14 @@ class MappingConfig:
     smooth_frames: bool = True
     """After the refit, solve all frames' poses together under a constant-velocity motion prior, each frame
     weighted by its refit's pose information (`mapping/smoothing.py`): removes the per-frame jitter of poses
-    solved alone (needs `refit_frames`). Measured: docs/results/jitter.md"""
+    solved alone (needs `refit_frames`). Measured: docs/results/settings.md#mapping-smooth_frames"""
     smooth_accel_sigma: float = valid(0.15, 0.001, 1000.0)
     """Motion prior of the smoother: white-noise acceleration, m/s^2 per sqrt(Hz) (larger: follows each
     frame's own solve more closely; Huber-weighted, so real jolts pass). 0.05-0.25 scored alike on the synthetic
-    room, augmented seeds and 7-Scenes; 1.0 kept much of the jitter. Measured: docs/results/jitter.md"""
+    room, augmented seeds and 7-Scenes; 1.0 kept much of the jitter.
+    Measured: docs/results/settings.md#mapping-smooth_accel_sigma"""
     smooth_angular_sigma: float = valid(0.5, 0.001, 1000.0)
-    """The same for rotation, rad/s^2 per sqrt(Hz). Measured: docs/results/jitter.md"""
+    """The same for rotation, rad/s^2 per sqrt(Hz). Measured: docs/results/settings.md#mapping-smooth_angular_sigma"""
 
 
 @dataclass
