@@ -3,7 +3,8 @@ frame refit, the dense map, metrics and evaluation.
 
 The per-frame state kept is the pose relative to its reference keyframe, so BA and loop corrections move every
 frame's pose at the end, and (`mapping.refit_frames`) the map points it matched, so each frame's pose is then
-re-solved against the final map (`mapping/frame_refit.py`). Before each frame the stages get a fresh
+re-solved against the final map (`mapping/frame_refit.py`) and (`mapping.smooth_frames`) all frames smoothed
+together under a motion prior (`mapping/smoothing.py`). Before each frame the stages get a fresh
 `StageContext` (the motion model's predicted pose, the last tracked pose and its covariance, the run's history of
 past frames), never the tracker. The run owns that history (`worker.slam.history`): it records each frame after
 its stages ran and gives it its pose once tracked. With the sequence's truth, an observer scores the stages'
@@ -28,6 +29,7 @@ from worker.slam.io.trajectory import Trajectory
 from worker.slam.mapping.carve import FrameViews
 from worker.slam.mapping.dense_map import build_dense_map
 from worker.slam.mapping.frame_refit import refit_poses
+from worker.slam.mapping.smoothing import SmootherSettings, smooth_poses
 from worker.slam.run.callbacks import ProgressFn
 from worker.slam.run.deferred import DeferredWork
 from worker.slam.run.evaluation import RunEvaluation, evaluate_run
@@ -205,15 +207,20 @@ class PipelineRun:
                 f"a map (tracking.init_min_points {self.config.tracking.init_min_points})")
 
     def _trajectory(self) -> tuple[Trajectory, int]:
-        """Every frame's final T_WC, lost ones too (through its reference keyframe, re-solved against the final map when
-        `mapping.refit_frames`), and how many frames were re-solved. Starts the timer's lap of "dense"."""
-        smap = self.parts.map
+        """Every frame's final T_WC, lost ones too (through its reference keyframe, re-solved against the final map
+        when `mapping.refit_frames`, then smoothed when `mapping.smooth_frames`), and how many frames were
+        re-solved. Starts the timer's lap of "dense"."""
+        smap, mc = self.parts.map, self.config.mapping
         self.timer.mark()
         poses = self.log.poses(smap)
         n_refit = 0
         if self.log.matches is not None and len(smap):
-            n_refit = refit_poses(poses, self.log.matches, smap.points, self.parts.sensor, self.config.tracking)
+            n_refit, info = refit_poses(poses, self.log.matches, smap.points, self.parts.sensor, self.config.tracking)
             self.timer.lap("frame_refit")  # "dense" times the dense map alone
+            if mc.smooth_frames:
+                settings = SmootherSettings(mc.smooth_accel_sigma, mc.smooth_angular_sigma)
+                poses = smooth_poses(poses, np.asarray(self.log.stamps, dtype=np.float64), info, settings)
+                self.timer.lap("frame_smoothing")
         return Trajectory(np.array(self.log.stamps, dtype=np.float64), orthonormalize(poses)), n_refit
 
     def _dense_map(self, traj: Trajectory, tracked: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
