@@ -10,7 +10,7 @@ from fastapi import APIRouter, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from sqlalchemy.orm import Session, sessionmaker
 
-from backend.api import batches, health, job_files, jobs, presets, sequences
+from backend.api import batches, health, job_files, jobs, live, presets, sequences
 from backend.api.deps import document_auth
 from backend.api.docs import include_docs
 from backend.api.edge import EdgeMiddleware
@@ -95,6 +95,7 @@ def create_app(
             {"name": "sequences", "description": "RGB-D sequences in the TUM layout"},
             {"name": "jobs", "description": "pipeline runs, their progress and outputs"},
             {"name": "batches", "description": "sequences x presets comparisons"},
+            {"name": "live", "description": "live sessions: frames streamed over a WebSocket, run as they arrive"},
             {"name": "presets", "description": "pipeline and camera preset names"},
             {"name": "health", "description": "liveness"},
         ],
@@ -107,7 +108,7 @@ def create_app(
     install_error_handlers(app)
 
     api = APIRouter(prefix=API_PREFIX)
-    for module in (health, presets, sequences, jobs, job_files, batches):
+    for module in (health, presets, sequences, jobs, job_files, batches, live):
         api.include_router(module.router)
     app.include_router(api)
     include_dashboard(app)  # dashboard pages, /static, the viewer endpoint and its /viewer/ proxy
