@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from storage.live import LiveSpool, SpooledFrame, StreamEnd
-from worker.runner import Cancelled, CancelFn, ProgressFn, RunOutput
+from worker.runner import CancelFn, Cancelled, ProgressFn, RunOutput
 from worker.snapshots import PartialWriter
 
 log = logging.getLogger("worker.live")

@@ -11,7 +11,6 @@ a frame is kept whole or not at all. A session holds at most as much as an uploa
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import struct
@@ -92,8 +91,9 @@ class FrameReceiver:
         if t <= self.last_t:
             raise InvalidInput(f"{label}: timestamp {t} is not after the previous frame's ({self.last_t})",
                                {"timestamp": t, "previous": self.last_t})
-        if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (n_rgb, n_depth)):
+        if not (_count(n_rgb) and _count(n_depth)):
             raise InvalidInput(f"{label}: 'rgb' and 'depth' must be the images' byte counts")
+        assert isinstance(n_rgb, int) and isinstance(n_depth, int)
         body = message[4 + n:]
         if len(body) != n_rgb + n_depth:
             raise InvalidInput(f"{label}: the header promises {n_rgb} + {n_depth} image bytes, the message has "
@@ -140,3 +140,7 @@ class FrameReceiver:
         except BaseException:
             path.unlink(missing_ok=True)
             raise
+
+
+def _count(v: object) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v > 0

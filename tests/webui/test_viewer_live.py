@@ -2,6 +2,7 @@
 into the finished run's scene."""
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -22,7 +23,7 @@ def _tum(n: int) -> str:
 
 def _snapshot(d: Path, n: int, points: int) -> None:
     d.mkdir(parents=True, exist_ok=True)
-    (d / artifacts.PARTIAL_STATE).write_text('{"frames": %d}' % n)
+    (d / artifacts.PARTIAL_STATE).write_text(json.dumps({"frames": n}))
     (d / artifacts.PARTIAL_TRAJECTORY).write_text(_tum(n))
     (d / artifacts.PARTIAL_KEYFRAMES).write_text(_tum(n).splitlines(keepends=True)[0])
     rng = np.random.default_rng(points)
