@@ -24,10 +24,12 @@ def stream_command(
     preset: Annotated[str, typer.Option("--preset", help="Pipeline preset.")] = "no-restoration",
     name: Annotated[str | None, typer.Option("--name", help="Name of the session's sequence.")] = None,
     max_frames: Annotated[int | None, typer.Option("--max-frames", min=1, help="Send only the first N.")] = None,
+    wait: Annotated[bool, typer.Option("--wait/--no-wait", help="Start sending once a worker is ready for the "
+                                       "session (else the frames of its start-up are dropped as stale).")] = True,
 ) -> None:
     """Start a live session and send the frames; the job page shows the run while it streams. Ends the
     session after the last frame (sending the source's ground truth first, so the job reports ATE)."""
-    from cli.stream.client import create_session, send
+    from cli.stream.client import create_session, send, wait_ready
     from cli.stream.source import open_source
     from storage.errors import InvalidInput
 
@@ -38,6 +40,8 @@ def stream_command(
             raise InvalidInput("the source has no camera.json: give --camera PRESET")
         session = create_session(to, token, cam, preset, name)
         typer.echo(f"live session: job {session['job_id']}  page {to.rstrip('/')}/jobs/{session['job_id']}")
+        if wait:
+            wait_ready(to, session["job_id"])
         report = send(to, session, src, token=token, rate=rate)
     end = report.ended or {}
     if end.get("type") == "error":

@@ -35,6 +35,10 @@ class LiveConfig:
     """A stream that sent nothing (and did not end) for this long is ended by the worker (an api that died)."""
 
 
+READY_STAGE = "waiting for frames"
+"""The job's stage once the live runner is ready (a client streaming a recording may wait for it)."""
+
+
 class StreamEnded(Exception):
     """The spool ended (or went silent) before the next frame."""
 
@@ -57,14 +61,20 @@ def run_live_slam(sequence_dir: Path, camera: dict[str, Any], preset: str, overr
     live = live or LiveConfig()
     cam = camera_from_preset(camera["preset"]) if "preset" in camera else Camera.from_dict(camera)
     config = get_preset(preset, overrides or None)
+    # the stages (the segmentation network) are built before the first frame is waited for: loading them
+    # takes seconds, during which a stream would fall behind; rebuilt only if the frames are of another size
+    stages = shipped_catalog().build_stages(config, cam)
     follower = _Follower(LiveSpool(sequence_dir), live, should_cancel)
+    follower.skip_waiting()  # frames that came while the worker started are stale: counted as dropped
+    progress(0, 0, READY_STAGE)
     try:
         first = follower.next()
     except StreamEnded as exc:
         raise SequenceFormatError(f"the live session received no frame ({exc})") from None
     reader = _FrameReader(sequence_dir, cam)
     frame = reader.read(first)
-    stages = shipped_catalog().build_stages(config, reader.camera)
+    if reader.camera is not cam:
+        stages = shipped_catalog().build_stages(config, reader.camera)
     with PipelineRun(reader.camera, config, stages, on_step=snapshot) as run:
         while True:
             if snapshot is not None:
@@ -105,6 +115,13 @@ class _Follower:
         return {"frames_received": self.received, "frames_processed": self.processed,
                 "frames_dropped": self.dropped, "max_behind": self.live.max_behind}
 
+    def skip_waiting(self) -> None:
+        """Drop all but the newest ``max_behind`` frames received so far."""
+        n = self.spool.count()
+        if n - self.next_index > self.live.max_behind:
+            self.dropped += n - self.live.max_behind - self.next_index
+            self.next_index = n - self.live.max_behind
+
     def next(self) -> SpooledFrame:
         quiet_since = time.monotonic()
         while True:
@@ -112,10 +129,7 @@ class _Follower:
                 raise Cancelled(f"cancelled after {self.processed} frames of the live session")
             n = self.spool.count()
             if n > self.next_index:
-                waiting = n - self.next_index
-                if waiting > self.live.max_behind:
-                    self.dropped += waiting - self.live.max_behind
-                    self.next_index = n - self.live.max_behind
+                self.skip_waiting()
                 frame = self.spool.frame(self.next_index)
                 self.next_index += 1
                 self.processed += 1

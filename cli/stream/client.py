@@ -47,6 +47,27 @@ def create_session(base: str, token: str | None, camera: str | dict[str, Any], p
     return r.json()
 
 
+READY_STAGE = "waiting for frames"
+"""The job stage of a live runner ready for frames (worker.live.READY_STAGE; the CLI never imports the worker's
+module for a string)."""
+
+
+def wait_ready(base: str, job_id: str, timeout_s: float = 300.0) -> None:
+    """Wait until a worker runs the session's job and waits for frames (a recording sent before would be mostly
+    dropped: the frames of the worker's start-up are stale by the time it is ready)."""
+    import httpx
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        job = httpx.get(f"{base.rstrip('/')}/api/v1/jobs/{job_id}", timeout=30).json()
+        if job["status"] != "queued" and job["stage"] not in ("", "starting"):
+            if job["status"] != "running":
+                raise StreamError(f"the session's job ended before the stream: {job.get('error') or job['status']}")
+            return
+        time.sleep(0.2)
+    raise StreamError(f"no worker took the session's job in {timeout_s:g} s (is `vtdslam worker` running?)")
+
+
 def send(base: str, session: dict[str, Any], source: StreamSource, *, token: str | None = None,
          rate: float | None = None, on_frame: Callable[[int, float], None] | None = None) -> StreamReport:
     """Stream `source` into `session`: at the recorded timing, or `rate` frames per second when given."""
