@@ -51,11 +51,14 @@ def _children(pid: int) -> list[int]:
     return out
 
 
-def _peak_mb(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
+def _usage(pid: int) -> tuple[str, float, float]:
+    """(role, peak resident MB, CPU seconds) of a `vtdslam serve` child."""
+    cmd = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    role = "api" if b"cli.api_server" in cmd else cmd[3].decode() if len(cmd) > 3 else "?"
+    peak = next((int(ln.split()[1]) / 1024 for ln in Path(f"/proc/{pid}/status").read_text().splitlines()
+                 if ln.startswith("VmHWM:")), float("nan"))
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return role, peak, (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 class PagePoller(threading.Thread):
@@ -102,7 +105,8 @@ def _offline_ate(seq_dir: Path, camera: str, preset: str, out: Path) -> tuple[fl
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seq", type=Path, default=Path(os.environ.get("VTD_SHARED_DIR", "../shared")) / "data/bonn_crowd_dev")
+    shared = Path(os.environ.get("VTD_SHARED_DIR", "../shared"))
+    ap.add_argument("--seq", type=Path, default=shared / "data/bonn_crowd_dev")
     ap.add_argument("--camera", default="bonn")
     ap.add_argument("--preset", default="no-restoration")
     ap.add_argument("--rate", type=float, default=30.0)
@@ -139,14 +143,14 @@ def main() -> None:
             stream_s = time.monotonic() - t0
             job = _wait_job(base, job_id)
             poller.stop.set()
-            peaks = {pid: _peak_mb(pid) for pid in _children(serve.pid)}
+            usage = [_usage(pid) for pid in _children(serve.pid)]
         finally:
             serve.send_signal(signal.SIGINT)
             serve.wait(60)
-        _report(args, source, report, stream_s, job, poller, peaks, Path(tmp))
+        _report(args, source, report, stream_s, job, poller, usage, Path(tmp))
 
 
-def _report(args, source, report, stream_s, job, poller, peaks, tmp: Path) -> None:  # noqa: ANN001
+def _report(args, source, report, stream_s, job, poller, usage, tmp: Path) -> None:  # noqa: ANN001
     m = job.get("metrics") or {}
     page = np.array([1000 * (s - a) for s, a, _ in poller.seen.values() if a is not None])
     worker = np.array([1000 * (d - a) for _, a, d in poller.seen.values() if a is not None])
@@ -167,10 +171,16 @@ def _report(args, source, report, stream_s, job, poller, peaks, tmp: Path) -> No
         ("arrival -> pose in the worker, median / p99 (ms)", _pct(worker)),
         ("poses seen by the page poller", f"{len(page)} of {m.get('live_frames_processed')}"),
         ("peak memory api + worker + viewer (MB)",
-         f"{sum(peaks.values()):.0f} ({', '.join(f'{v:.0f}' for v in peaks.values())})"),
+         f"{sum(u[1] for u in usage):.0f} ({', '.join(f'{r} {p:.0f}' for r, p, _ in usage)})"),
+        ("CPU seconds by process (whole session)", ", ".join(f"{r} {c:.1f}" for r, _, c in usage)),
         ("ATE RMSE live (m)", _m(live_ate)),
         ("ATE RMSE offline, same frames (m)", _m(offline) + (f" ({offline_s:.0f} s)" if offline_s else "")),
         ("live / offline ATE", f"{live_ate / offline:.3f}" if live_ate and offline else "-"),
+        ("live run: fps of the frames it ran; top steps (ms per call)",
+         f"{_m(m.get('fps'))}; " + ", ".join(f"{k} {v:.0f}" for k, v in sorted(
+             ((k, v) for k, v in (m.get("timings_ms") or {}).items() if isinstance(v, int | float)),
+             key=lambda kv: -kv[1])[:4])),
+        ("offline fps, same frames, same machine", f"{len(source.frames) / offline_s:.1f}" if offline_s else "-"),
         ("load average at the end", " ".join(f"{x:.1f}" for x in os.getloadavg())),
     ]
     width = max(len(k) for k, _ in rows)
