@@ -69,7 +69,7 @@ class PartialWriter:
         self.recent: deque[dict[str, Any]] = deque(maxlen=self.config.recent)
         self.arrivals: dict[int, float] = {}
         self.clouds: dict[int, _Cloud] = {}
-        self.frames = self.tracked = 0
+        self.frames = self.tracked = self.map_points = 0
         self.last_full = 0.0
         self.failed = False
 
@@ -104,7 +104,7 @@ class PartialWriter:
     def write_state(self, **extra: Any) -> None:
         """partial.json: written to a hidden name and renamed (readers never see half of it); no fsync, it is
         rewritten after every frame and worthless after a crash."""
-        state = {"frames": self.frames, "tracked": self.tracked, **self.counts, **extra,
+        state = {"frames": self.frames, "tracked": self.tracked, "map_points": self.map_points, **self.counts, **extra,
                  "updated": time.time(), "recent": list(self.recent)}
         folder = self.store.job_dir(self.job_id, create=True)
         tmp = folder / f".{artifacts.PARTIAL_STATE}.tmp"
@@ -117,6 +117,7 @@ class PartialWriter:
         self.store.write_text(self.job_id, artifacts.PARTIAL_KEYFRAMES,
                               _tum([kf.timestamp for kf in kfs], [kf.T_WC for kf in kfs]))
         xyz, rgb = self._map(run)
+        self.map_points = len(xyz)
         write_ply(self.store.job_dir(self.job_id, create=True) / artifacts.PARTIAL_MAP, xyz, rgb)  # atomic
         self._write_images(frame, inputs)
 

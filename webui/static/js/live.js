@@ -16,7 +16,8 @@
     for (const r of s.recent) if (r.tracked) path.set(r.index, r.position);
     const last = s.recent[s.recent.length - 1];
     const delays = s.recent.filter((r) => r.arrival).map((r) => 1000 * (r.done - r.arrival));
-    const items = [["Frames run", String(s.frames)], ["Tracked", String(s.tracked)], ["Keyframes", String(s.run_keyframes ?? "—")]];
+    const items = [["Frames run", String(s.frames)], ["Tracked", String(s.tracked)], ["Keyframes", String(s.run_keyframes ?? "—")],
+      ["Map points", String(s.map_points ?? 0)]];
     if (s.frames_received !== undefined) {
       items.push(["Received", String(s.frames_received)], ["Dropped", String(s.frames_dropped)]);
     }
