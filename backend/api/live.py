@@ -64,7 +64,7 @@ class LiveOut(BaseModel):
 
 
 @router.post("/live", status_code=status.HTTP_201_CREATED, response_model=LiveOut, dependencies=[Auth],
-             responses=error_responses(401, 413, 422, 503))
+             responses=error_responses(400, 401, 413, 422, 503))
 def create_session(body: LiveCreate, session: SessionDep, store: StoreDep, enqueue: EnqueueDep) -> LiveOut:
     """Start a live session: an empty sequence that fills as frames arrive, and its job."""
     camera = parse_camera_spec(body.camera)
