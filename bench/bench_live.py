@@ -167,7 +167,7 @@ def _report(args, source, report, stream_s, job, poller, usage, tmp: Path) -> No
         ("job", f"{job['status']}" + (f" ({job['error']})" if job.get("error") else "")),
         ("frames received / processed / dropped",
          f"{received} / {m.get('live_frames_processed')} / {dropped}"
-         + (f" ({100 * dropped / received:.1f} % dropped)" if received else "")),
+         + (f" ({100 * dropped / received:.1f} % dropped)" if received and dropped is not None else "")),
         (f"arrival -> pose on the page (polled every {args.poll:g} s), median / p99 (ms)", _pct(page)),
         ("arrival -> pose in the worker, median / p99 (ms)", _pct(worker)),
         ("poses seen by the page poller", f"{len(page)} of {m.get('live_frames_processed')}"),

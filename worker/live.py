@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -76,17 +77,7 @@ def run_live_slam(sequence_dir: Path, camera: dict[str, Any], preset: str, overr
     if reader.camera is not cam:
         stages = shipped_catalog().build_stages(config, reader.camera)
     with PipelineRun(reader.camera, config, stages, on_step=snapshot) as run:
-        while True:
-            if snapshot is not None:
-                snapshot.arrival(first.index, first.arrival)
-                snapshot.counts.update(follower.counts())
-            run.step(frame)
-            progress(follower.processed, follower.received, "live")
-            try:
-                first = follower.next()
-            except StreamEnded:
-                break
-            frame = reader.read(first)
+        _follow(run, follower, reader, (first, frame), snapshot, progress)
         progress(follower.processed, follower.received, "finishing")
         run.sequence = Sequence(sequence_dir, reader.camera)  # complete now: its ground truth scores the run
         result = run.finish()
@@ -96,6 +87,38 @@ def run_live_slam(sequence_dir: Path, camera: dict[str, Any], preset: str, overr
     log.info("live session: %s", follower.counts())
     return RunOutput(metrics=result.metrics, config=config.to_dict(),
                      frame_stats=[FrameStats.from_row(r) for r in result.frame_stats])
+
+
+def _follow(run: Any, follower: _Follower, reader: _FrameReader, first: tuple[SpooledFrame, Any],
+            snapshot: PartialWriter | None, progress: ProgressFn) -> None:
+    """Step `run` through the session until the stream ends. While a frame runs, the next one waiting (if any)
+    is decoded on a reader thread and its stages' `prepare` work (the segmentation network) starts on another, as
+    the offline driver overlaps them (`worker.slam.run.driver`); each works in frame order."""
+    from worker.slam.io.prepare_ahead import PrepareAhead
+
+    with PrepareAhead(run.stages.preparers()) as prep, \
+            ThreadPoolExecutor(1, thread_name_prefix="vtdslam-live-read") as pool:
+        def load(ref: SpooledFrame) -> tuple[SpooledFrame, Any]:
+            return ref, prep.submit(reader.read(ref))
+
+        ahead: Future[tuple[SpooledFrame, Any]] | None = None
+        ref, item = first[0], prep.submit(first[1])
+        while True:
+            nxt = follower.take()  # already waiting: read it while this frame runs
+            if nxt is not None:
+                ahead = pool.submit(load, nxt)
+            if snapshot is not None:
+                snapshot.arrival(ref.index, ref.arrival)
+                snapshot.counts.update(follower.counts())
+            run.step(item)
+            progress(follower.processed, follower.received, "live")
+            if ahead is None:
+                try:
+                    ahead = pool.submit(load, follower.next())
+                except StreamEnded:
+                    return
+            ref, item = ahead.result()
+            ahead = None
 
 
 class _Follower:
@@ -122,6 +145,19 @@ class _Follower:
             self.dropped += n - self.live.max_behind - self.next_index
             self.next_index = n - self.live.max_behind
 
+    def take(self) -> SpooledFrame | None:
+        """The next frame if one is waiting (never blocks)."""
+        if self.spool.count() <= self.next_index:
+            return None
+        return self._pick()
+
+    def _pick(self) -> SpooledFrame:
+        self.skip_waiting()
+        frame = self.spool.frame(self.next_index)
+        self.next_index += 1
+        self.processed += 1
+        return frame
+
     def next(self) -> SpooledFrame:
         quiet_since = time.monotonic()
         while True:
@@ -129,11 +165,7 @@ class _Follower:
                 raise Cancelled(f"cancelled after {self.processed} frames of the live session")
             n = self.spool.count()
             if n > self.next_index:
-                self.skip_waiting()
-                frame = self.spool.frame(self.next_index)
-                self.next_index += 1
-                self.processed += 1
-                return frame
+                return self._pick()
             self.end = self.spool.ended()
             if self.end is not None and self.spool.count() <= self.next_index:
                 raise StreamEnded(self.end.reason)

@@ -40,6 +40,7 @@ def test_the_job_page_shows_the_map_grow_during_a_live_session(playwright_api, s
                                                               tmp_path: Path, shots: Path) -> None:
     folder = write_sequence(tmp_path / "seq", n=FRAMES)
     source = tum_source(folder)
+    assert source.camera is not None
     session = create_session(service.base, None, source.camera, "orb-only", "browser live")
     job = session["job_id"]
     wait_ready(service.base, job)
