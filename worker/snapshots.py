@@ -71,7 +71,8 @@ class PartialWriter:
         self.clouds: dict[int, _Cloud] = {}
         self.frames = self.tracked = self.map_points = 0
         self.last_full = 0.0
-        self.failed = False
+        self.error: str | None = None
+        """Why snapshots stopped being written (the run goes on; the job's metrics name it as a warning)."""
 
     def arrival(self, index: int, at: float) -> None:
         """When frame ``index`` reached the service (Unix seconds): reported beside its pose."""
@@ -82,9 +83,9 @@ class PartialWriter:
         try:
             self._step(run, frame, inputs, res)
         except Exception as exc:  # noqa: BLE001 - snapshots are for watching; the run's results do not need them
-            if not self.failed:
-                self.failed = True
-                log.warning("job %s: partial results not written: %s: %s", self.job_id, type(exc).__name__, exc)
+            if self.error is None:
+                self.error = f"partial results not written: {type(exc).__name__}: {exc}"
+                log.warning("job %s: %s", self.job_id, self.error)
 
     def _step(self, run: PipelineRun, frame: Frame, inputs: FrameInputs, res: TrackResult) -> None:
         self.frames += 1

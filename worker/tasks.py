@@ -28,7 +28,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from formats import artifacts
 from formats.frame_stats import STORED_COLUMNS, format_frame_stats
-from formats.run_metrics import RunMetrics
+from formats.run_metrics import RunMetrics, write_run_metrics
 from storage import live as live_spool
 from storage.artifacts import ArtifactStore
 from storage.errors import Conflict, NotFound, StorageError
@@ -211,6 +211,8 @@ def _run_claimed(
             **({"snapshot": partial} if partial is not None else {}),
         )
         run_s = time.monotonic() - t0
+        if partial is not None and partial.error is not None:  # the fallback (no live view) is on record
+            _warn(output, out_dir, partial.error)
         reporter.progress(reporter.total, reporter.total, "saving")
         _preview(out_dir)
         if reporter.stop_reason in ("deleted", "ended"):  # not ours any more: store nothing
@@ -252,6 +254,13 @@ def _run_claimed(
         if live:
             _end_session(ctx, session, job_id)
     return _finish(ctx, session, job_id, attempt, status, error, timings, joblog)
+
+
+def _warn(output: RunOutput, out_dir: Path, warning: str) -> None:
+    """Add ``warning`` to the run's metrics (the stored ones and its metrics.json)."""
+    output.metrics["warnings"] = [*output.metrics.get("warnings", []), warning]
+    if (out_dir / artifacts.METRICS).is_file():
+        write_run_metrics(out_dir / artifacts.METRICS, RunMetrics.from_dict(output.metrics))
 
 
 def _end_session(ctx: WorkerContext, session: Session, job_id: str) -> None:
