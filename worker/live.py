@@ -61,7 +61,9 @@ def run_live_slam(sequence_dir: Path, camera: dict[str, Any], preset: str, overr
 
     live = live or LiveConfig()
     cam = camera_from_preset(camera["preset"]) if "preset" in camera else Camera.from_dict(camera)
-    config = get_preset(preset, overrides or None)
+    # a stream has no frames after the latest: restoration takes its references from the past (its "causal"
+    # mode, meant for streaming input) unless the session's config says otherwise
+    config = get_preset(preset, {"restoration.references": "causal", **(overrides or {})})
     # the stages (the segmentation network) are built before the first frame is waited for: loading them
     # takes seconds, during which a stream would fall behind; rebuilt only if the frames are of another size
     stages = shipped_catalog().build_stages(config, cam)

@@ -145,7 +145,7 @@ async def stream_frames(websocket: WebSocket, job_id: str) -> None:
         connected = False
     finally:  # synchronous: a handler cancelled by its server's shutdown still records the session
         writer.shutdown(wait=True)
-        end = spool.end(reason, receiver.frames)
+        end = _end(spool, reason, receiver.frames)
         _finalize(app, seq_id)
     if connected and end.reason == reason:
         await websocket.send_json({"type": "ended", "frames": end.frames, "job_id": job_id, "reason": end.reason})
@@ -172,6 +172,14 @@ async def _receive(websocket: WebSocket, receiver: FrameReceiver, spool: spool_m
         ended = spool.ended()
         if ended is not None:  # the worker gave up on the session (cancelled, stopped)
             raise Conflict(f"the session ended: {ended.reason}", {"reason": ended.reason})
+
+
+def _end(spool: spool_mod.LiveSpool, reason: str, frames: int) -> spool_mod.StreamEnd:
+    try:
+        return spool.end(reason, frames)
+    except OSError as exc:  # the sequence was deleted meanwhile: nothing left to end
+        log.warning("live session %s: could not mark its end: %s", spool.folder.name, exc)
+        return spool_mod.StreamEnd(reason, frames, time.time())
 
 
 def _finalize(app: Any, seq_id: str) -> None:

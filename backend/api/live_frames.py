@@ -16,7 +16,8 @@ import os
 import struct
 from pathlib import Path
 
-from storage.errors import InvalidInput, PayloadTooLarge
+from storage.errors import Conflict, InvalidInput, PayloadTooLarge
+from storage.faults import disk_full, insufficient_storage
 from storage.ingest import upload_limits
 from storage.ingest.images import ImageInfo, check_image
 from storage.ingest.sequence import MIN_SIZE, read_groundtruth
@@ -56,17 +57,22 @@ class FrameReceiver:
         name = f"{t:.6f}"
         rgb_rel, depth_rel = f"rgb/{name}{ext}", f"depth/{name}.png"
         tmp_rgb, tmp_depth = self.folder / "rgb" / f".{name}.tmp", self.folder / "depth" / f".{name}.tmp"
+        frame = SpooledFrame(self.frames, t, round(arrival, 6), rgb_rel, depth_rel)
         try:
             tmp_rgb.write_bytes(rgb)
             tmp_depth.write_bytes(depth)
             self._check(check_image(tmp_rgb, label=rgb_rel), check_image(tmp_depth, label=depth_rel), depth_rel)
             os.replace(tmp_rgb, self.folder / rgb_rel)
             os.replace(tmp_depth, self.folder / depth_rel)
+            self.spool.append(frame)
+        except OSError as exc:  # the disk filled up, or the session's sequence was deleted meanwhile
+            if disk_full(exc):
+                raise insufficient_storage("keeping a live frame") from exc
+            raise Conflict(f"{label_of(frame)}: the session's sequence cannot be written ({exc.strerror or exc}); "
+                           "was it deleted?") from exc
         finally:
             tmp_rgb.unlink(missing_ok=True)
             tmp_depth.unlink(missing_ok=True)
-        frame = SpooledFrame(self.frames, t, round(arrival, 6), rgb_rel, depth_rel)
-        self.spool.append(frame)
         self.frames += 1
         self.bytes += len(message)
         self.last_t = t
@@ -144,3 +150,7 @@ class FrameReceiver:
 
 def _count(v: object) -> bool:
     return isinstance(v, int) and not isinstance(v, bool) and v > 0
+
+
+def label_of(frame: SpooledFrame) -> str:
+    return f"frame {frame.index}"

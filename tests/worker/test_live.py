@@ -138,3 +138,22 @@ def test_a_worker_behind_drops_the_oldest_frames_and_counts_them(service, folder
     assert str(result[0]) == "succeeded"
     assert m["live_frames_dropped"] == N - 4 and m["live_frames_processed"] == 4
     assert json.loads(client.get(f"/api/v1/jobs/{s['job_id']}/artifacts/metrics.json").text)["frames"] == 4
+
+
+def test_a_restoring_preset_runs_live_with_causal_references(service, folder) -> None:
+    """`full` restores from neighbouring frames; a stream has none after the latest, so a live session takes
+    them from the past (restoration.references 'causal') instead of reading frames that do not exist yet."""
+    client, ctx, _ = service
+    s = start_session(client, CAMERA, preset="full")
+    thread, result = _worker(ctx, s["job_id"])
+    with client.websocket_connect(s["stream_url"]) as ws:
+        ws.receive_json()
+        for i, m in enumerate(frame_messages(folder, 12)):
+            ws.send_bytes(m)
+            _wait_processed(client, s["job_id"], i + 1, timeout=120)
+        ws.send_json({"type": "end"})
+        ws.receive_json()
+    thread.join(300)
+    job = client.get(f"/api/v1/jobs/{s['job_id']}").json()
+    assert str(result[0]) == "succeeded", job["error"]
+    assert job["config"]["restoration"]["references"] == "causal" and job["metrics"]["live_frames_processed"] == 12

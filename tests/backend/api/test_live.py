@@ -127,3 +127,17 @@ def test_token_is_required_when_set(tmp_path, queue, frames) -> None:
 def test_bad_session_requests_get_a_clear_4xx(client: TestClient) -> None:
     assert client.post("/api/v1/live", json={"camera": "nosuchcamera"}).status_code == 422
     assert client.post("/api/v1/live", json={"camera": CAMERA, "preset": "nosuchpreset"}).status_code == 422
+
+
+def test_a_session_whose_sequence_is_deleted_ends_with_a_clear_error(client: TestClient, frames) -> None:
+    s = start_session(client, CAMERA)
+    with client.websocket_connect(s["stream_url"]) as ws:
+        ws.receive_json()
+        ws.send_bytes(frames[0])
+        ws.send_json({"type": "ping"})
+        assert ws.receive_json()["frames"] == 1
+        assert client.delete(f"/api/v1/sequences/{s['sequence_id']}").status_code == 204
+        ws.send_bytes(frames[1])
+        msg, code = _closed(ws)
+    assert code == 4409 and "cannot be written" in msg["error"]["message"]
+    assert client.get(f"/api/v1/sequences/{s['sequence_id']}").status_code == 404
