@@ -32,7 +32,8 @@ DESCRIPTION = """Dynamic-scene RGB-D SLAM service (VTD-SLAM).
 
 Upload a TUM-layout sequence (`POST /sequences`), queue runs (`POST /jobs`, or a whole preset comparison
 with `POST /batches`), follow them live (`GET /jobs/{id}/events`, Server-Sent Events) and download the
-trajectory, dense map and metrics (`GET /jobs/{id}/artifacts/{name}`).
+trajectory, dense map and metrics (`GET /jobs/{id}/artifacts/{name}`). A camera or a recording can also stream
+into a live session (`POST /live`, then the WebSocket `/live/{job_id}/stream`): its frames run as they arrive.
 
 Errors always have the shape `{"error": {"code", "message", "detail"}}`. When the server sets
 `VTD_API_TOKEN`, mutating endpoints need `Authorization: Bearer <token>`. Every `GET` also answers `HEAD`.

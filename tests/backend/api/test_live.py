@@ -141,3 +141,15 @@ def test_a_session_whose_sequence_is_deleted_ends_with_a_clear_error(client: Tes
         msg, code = _closed(ws)
     assert code == 4409 and "cannot be written" in msg["error"]["message"]
     assert client.get(f"/api/v1/sequences/{s['sequence_id']}").status_code == 404
+
+
+def test_a_bad_ground_truth_is_refused_and_not_kept(client: TestClient, frames, settings) -> None:
+    s = start_session(client, CAMERA)
+    with client.websocket_connect(s["stream_url"]) as ws:
+        ws.receive_json()
+        ws.send_bytes(frames[0])
+        ws.send_json({"type": "groundtruth", "text": "1.0 nonsense\n"})
+        msg, code = _closed(ws)
+    assert code == 4422 and msg["error"]["message"].startswith("groundtruth.txt")
+    assert not (settings.data_dir / "sequences" / s["sequence_id"] / "groundtruth.txt").exists()
+    assert client.get(f"/api/v1/sequences/{s['sequence_id']}").json()["frames"] == 1
