@@ -93,8 +93,8 @@ class ViewerHub:
                 self._servers.move_to_end(job_id)
                 return self._address(self._servers[job_id])
             run_dir = self.store.job_dir(job_id)
-            running = partial_state(run_dir) == PARTIAL  # a running job's snapshots: a scene that grows
             try:
+                running = partial_state(run_dir) == PARTIAL  # a running job's snapshots: a scene that grows
                 data = None if running else load_run(run_dir)  # NotFound if the run has no trajectory
             except OSError as exc:  # files of another user on shared storage, an I/O error
                 raise Unreadable(
