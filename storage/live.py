@@ -30,6 +30,9 @@ CLIENT = "client"
 ENDED = "ended.json"
 LIVE_RECEIVING = "receiving"
 """``Sequence.meta['live']`` while a client may stream; the worker then runs the job as a live session."""
+LIVE_JOB = "live_job"
+"""``Sequence.meta`` key naming the session's own job: its end ends the stream (another job queued on the sequence
+while it receives follows the stream too, and leaves the session alone when it ends)."""
 LIVE_ENDED = "ended"
 """``Sequence.meta['live']`` after the stream ended: an ordinary sequence (a retried job runs it offline)."""
 

@@ -189,7 +189,7 @@ def _run_claimed(
     timings: dict[str, Any] | None = None
     saving = False
     partial: PartialWriter | None = None
-    live = False
+    live = own_session = False
     try:
         job = jobs.get(session, job_id)
         seq = sequences.get(session, job.sequence_id)
@@ -197,6 +197,7 @@ def _run_claimed(
                  job_id, job.preset, seq.name, seq.id, seq.frames, ctx.name)
         reporter.progress(0, seq.frames, "starting")
         live = (seq.meta or {}).get("live") == live_spool.LIVE_RECEIVING
+        own_session = live and (seq.meta or {}).get(live_spool.LIVE_JOB) == job_id
         if live or ctx.snapshots is not None:
             partial = PartialWriter(ctx.store, job_id, ctx.snapshots or SnapshotConfig())
         t0 = time.monotonic()
@@ -251,7 +252,7 @@ def _run_claimed(
         shutil.rmtree(out_dir, ignore_errors=True)
         if partial is not None:
             partial.remove()
-        if live:
+        if own_session:  # the session's own job ended (however): so does its stream
             _end_session(ctx, session, job_id)
     return _finish(ctx, session, job_id, attempt, status, error, timings, joblog)
 

@@ -77,6 +77,7 @@ def create_session(body: LiveCreate, session: SessionDep, store: StoreDep, enque
                          path=store.relative(folder), camera=camera,
                          meta={"source": "live", "live": spool_mod.LIVE_RECEIVING})
         job = jobs.create(session, sequence_id=seq_id, preset=preset, config=config)
+        sequences.update_meta(session, seq_id, {spool_mod.LIVE_JOB: job.id})
     except BaseException:
         store.delete_sequence(seq_id)
         raise

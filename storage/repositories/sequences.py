@@ -145,3 +145,11 @@ def set_recorded(session: Session, sequence_id: str, *, frames: int, duration_s:
         seq.has_groundtruth = has_groundtruth
         seq.meta = {**(seq.meta or {}), **meta}
     return seq
+
+
+def update_meta(session: Session, sequence_id: str, meta: dict[str, Any]) -> Sequence:
+    """Merge ``meta`` into the sequence's ``meta`` (a live session names its job there)."""
+    with writing(session):
+        seq = get(session, sequence_id)
+        seq.meta = {**(seq.meta or {}), **meta}
+    return seq

@@ -157,3 +157,30 @@ def test_a_restoring_preset_runs_live_with_causal_references(service, folder) ->
     job = client.get(f"/api/v1/jobs/{s['job_id']}").json()
     assert str(result[0]) == "succeeded", job["error"]
     assert job["config"]["restoration"]["references"] == "causal" and job["metrics"]["live_frames_processed"] == 12
+
+
+def test_a_second_job_on_a_receiving_session_follows_it_and_leaves_it_alone(service, folder) -> None:
+    """Another job queued on the session's sequence while it receives runs live too (another preset, say); when
+    it ends first, the session goes on for its client and its own job."""
+    client, ctx, _ = service
+    s = start_session(client, CAMERA)
+    own, own_result = _worker(ctx, s["job_id"])
+    messages = frame_messages(folder, 12)
+    with client.websocket_connect(s["stream_url"]) as ws:
+        ws.receive_json()
+        ws.send_bytes(messages[0])
+        _wait_processed(client, s["job_id"], 1)
+        other = client.post("/api/v1/jobs", json={"sequence_id": s["sequence_id"], "preset": "orb-only"}).json()
+        thread, result = _worker(ctx, other["id"])
+        _wait_processed(client, other["id"], 0)
+        assert client.post(f"/api/v1/jobs/{other['id']}/cancel").status_code == 200
+        thread.join(120)
+        assert str(result[0]) == "cancelled"
+        for i, m in enumerate(messages[1:]):  # the stream goes on
+            ws.send_bytes(m)
+            _wait_processed(client, s["job_id"], i + 2)
+        ws.send_json({"type": "end"})
+        assert ws.receive_json()["frames"] == 12
+    own.join(120)
+    assert str(own_result[0]) == "succeeded"
+    assert client.get(f"/api/v1/jobs/{s['job_id']}").json()["metrics"]["live_frames_processed"] == 12
