@@ -71,6 +71,8 @@ class PartialWriter:
         self.clouds: dict[int, _Cloud] = {}
         self.frames = self.tracked = self.map_points = 0
         self.last_full = 0.0
+        self.spent_s = 0.0
+        """Time the snapshots took on the pipeline thread (the job's timings_ms["snapshots"], per frame)."""
         self.error: str | None = None
         """Why snapshots stopped being written (the run goes on; the job's metrics name it as a warning)."""
 
@@ -80,12 +82,15 @@ class PartialWriter:
 
     def __call__(self, run: PipelineRun, frame: Frame, inputs: FrameInputs, res: TrackResult) -> None:
         """The run's ``on_step``: never fails the run (a snapshot that cannot be written is logged once)."""
+        t0 = time.perf_counter()
         try:
             self._step(run, frame, inputs, res)
         except Exception as exc:  # noqa: BLE001 - snapshots are for watching; the run's results do not need them
             if self.error is None:
                 self.error = f"partial results not written: {type(exc).__name__}: {exc}"
                 log.warning("job %s: %s", self.job_id, self.error)
+        finally:
+            self.spent_s += time.perf_counter() - t0
 
     def _step(self, run: PipelineRun, frame: Frame, inputs: FrameInputs, res: TrackResult) -> None:
         self.frames += 1

@@ -212,8 +212,8 @@ def _run_claimed(
             **({"snapshot": partial} if partial is not None else {}),
         )
         run_s = time.monotonic() - t0
-        if partial is not None and partial.error is not None:  # the fallback (no live view) is on record
-            _warn(output, out_dir, partial.error)
+        if partial is not None:
+            _snapshot_figures(output, out_dir, partial)
         reporter.progress(reporter.total, reporter.total, "saving")
         _preview(out_dir)
         if reporter.stop_reason in ("deleted", "ended"):  # not ours any more: store nothing
@@ -257,9 +257,13 @@ def _run_claimed(
     return _finish(ctx, session, job_id, attempt, status, error, timings, joblog)
 
 
-def _warn(output: RunOutput, out_dir: Path, warning: str) -> None:
-    """Add ``warning`` to the run's metrics (the stored ones and its metrics.json)."""
-    output.metrics["warnings"] = [*output.metrics.get("warnings", []), warning]
+def _snapshot_figures(output: RunOutput, out_dir: Path, partial: PartialWriter) -> None:
+    """What the partial results cost the pipeline thread (timings_ms["snapshots"], ms per frame) and, when they
+    stopped being written, why (a warning: the fallback is on record), in the stored metrics and metrics.json."""
+    if partial.frames:
+        output.metrics.setdefault("timings_ms", {})["snapshots"] = round(1000 * partial.spent_s / partial.frames, 2)
+    if partial.error is not None:
+        output.metrics["warnings"] = [*output.metrics.get("warnings", []), partial.error]
     if (out_dir / artifacts.METRICS).is_file():
         write_run_metrics(out_dir / artifacts.METRICS, RunMetrics.from_dict(output.metrics))
 

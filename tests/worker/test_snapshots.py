@@ -51,6 +51,8 @@ def test_an_offline_job_shows_its_run_so_far(tmp_path: Path, monkeypatch: pytest
     assert points[-1] > points[0]  # the map grew while the job ran
     names = {p.name for p in ctx.store.job_dir(job.id).iterdir()}
     assert set(artifacts.PIPELINE_OUTPUTS) <= names and not names & set(artifacts.PARTIALS)
+    on_disk = json.loads((ctx.store.job_dir(job.id) / artifacts.METRICS).read_text())
+    assert "snapshots" in on_disk["timings_ms"]  # what they cost the pipeline thread is on record
 
 
 def test_a_failed_snapshot_never_fails_the_job(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog) -> None:
