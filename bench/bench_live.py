@@ -180,7 +180,8 @@ def _report(args, source, report, stream_s, job, poller, usage, tmp: Path) -> No
         ("live run: fps of the frames it ran; top steps (ms per call)",
          f"{_m(m.get('fps'))}; " + ", ".join(f"{k} {v:.0f}" for k, v in sorted(
              ((k, v) for k, v in (m.get("timings_ms") or {}).items() if isinstance(v, int | float)),
-             key=lambda kv: -kv[1])[:4])),
+             key=lambda kv: -kv[1])[:4])
+         + f"; snapshots {(m.get('timings_ms') or {}).get('snapshots', '-')} per frame"),
         ("offline fps, same frames, same machine", f"{len(source.frames) / offline_s:.1f}" if offline_s else "-"),
         ("load average at the end", " ".join(f"{x:.1f}" for x in os.getloadavg())),
     ]

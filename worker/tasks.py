@@ -213,6 +213,7 @@ def _run_claimed(
         )
         run_s = time.monotonic() - t0
         if partial is not None:
+            partial.close()  # the last snapshot written: its outcome counts
             _snapshot_figures(output, out_dir, partial)
         reporter.progress(reporter.total, reporter.total, "saving")
         _preview(out_dir)

@@ -65,7 +65,8 @@ def _wait_processed(client: TestClient, job_id: str, n: int, timeout: float = 60
 
 def test_live_session_runs_as_frames_arrive_and_its_map_grows(service, folder) -> None:
     client, ctx, _ = service
-    ctx.snapshots = SnapshotConfig(interval_s=0.0)  # a snapshot after every frame: the growth is seen per frame
+    # a snapshot after every frame, on the pipeline thread: the growth is seen per frame
+    ctx.snapshots = SnapshotConfig(interval_s=0.0, background=False)
     s = start_session(client, CAMERA)
     job = s["job_id"]
     thread, result = _worker(ctx, job)

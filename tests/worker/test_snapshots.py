@@ -25,16 +25,17 @@ class Recording(PartialWriter):
 
     seen: list[tuple[int, int, int]] = []  # (frames, poses in partial_trajectory.txt, points in partial_map.ply)
 
-    def _write_full(self, run, frame, inputs) -> None:  # noqa: ANN001
-        super()._write_full(run, frame, inputs)
+    def _write(self, snap) -> None:  # noqa: ANN001
+        super()._write(snap)
         d = self.store.job_dir(self.job_id)
         poses = len((d / artifacts.PARTIAL_TRAJECTORY).read_text().splitlines())
-        Recording.seen.append((self.frames, poses, len(read_ply(d / artifacts.PARTIAL_MAP)[0])))
+        Recording.seen.append((snap.frames, poses, len(read_ply(d / artifacts.PARTIAL_MAP)[0])))
 
 
 def test_an_offline_job_shows_its_run_so_far(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     settings = get_settings(data_dir=tmp_path / "data")
-    ctx = build_context(settings, name="w1", snapshots=SnapshotConfig(interval_s=0.0))
+    # every frame's snapshot, written on the pipeline thread: none skipped
+    ctx = build_context(settings, name="w1", snapshots=SnapshotConfig(interval_s=0.0, background=False))
     folder = write_sequence(tmp_path / "seq", n=24)
     monkeypatch.setattr(tasks, "PartialWriter", Recording)
     Recording.seen = []
@@ -60,10 +61,10 @@ def test_a_failed_snapshot_never_fails_the_job(tmp_path: Path, monkeypatch: pyte
     ctx = build_context(settings, name="w1", snapshots=SnapshotConfig(interval_s=0.0))
     folder = write_sequence(tmp_path / "seq", n=8)
 
-    def broken(self, run, frame, inputs) -> None:  # noqa: ANN001
+    def broken(self, snap) -> None:  # noqa: ANN001
         raise OSError("disk gone")
 
-    monkeypatch.setattr(PartialWriter, "_write_full", broken)
+    monkeypatch.setattr(PartialWriter, "_write", broken)
     with ctx.session_factory() as s:
         seq = sequences.create(s, name="seq", path=str(folder), frames=8,
                                camera=json.loads((folder / "camera.json").read_text()))
