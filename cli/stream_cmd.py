@@ -20,7 +20,8 @@ def stream_command(
     rate: Annotated[float | None, typer.Option("--rate", min=0.1, max=1000.0,
                                                help="Frames per second (default: the recorded timing).")] = None,
     camera: Annotated[str | None, typer.Option(
-        "--camera", help="Camera preset (default: the source's camera.json; a bag's comes from its CameraInfo).")] = None,
+        "--camera",
+        help="Camera preset (default: the source's camera.json; a bag's comes from its CameraInfo).")] = None,
     preset: Annotated[str, typer.Option("--preset", help="Pipeline preset.")] = "no-restoration",
     name: Annotated[str | None, typer.Option("--name", help="Name of the session's sequence.")] = None,
     max_frames: Annotated[int | None, typer.Option("--max-frames", min=1, help="Send only the first N.")] = None,
