@@ -13,6 +13,7 @@ outputs against it (`truth_observer`); its scores are the "truth" entries of the
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from types import TracebackType
 
@@ -45,6 +46,10 @@ from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPos
 from worker.slam.tracking.result import TrackResult
 from worker.slam.truth import Truth
 
+StepFn = Callable[["PipelineRun", Frame, FrameInputs, TrackResult], None]
+"""Called after each frame's step with the run, the frame, what its stages made of it and its tracking result
+(the service writes partial snapshots through it while a job runs); it must not change the run."""
+
 
 class PipelineRun:
     """Contract: `step(frame)` once per frame, in frame order, on one thread (the pipeline thread); then
@@ -58,10 +63,13 @@ class PipelineRun:
 
     def __init__(self, camera: Camera, config: PipelineConfig, stages: list[FrameStage], *,
                  sequence: Sequence | None = None, truth: Truth | None = None, start: int = 0, total: int = 0,
-                 progress: ProgressFn | None = None, restore_behind: bool = True) -> None:
+                 progress: ProgressFn | None = None, restore_behind: bool = True,
+                 on_step: StepFn | None = None) -> None:
         """`restore_behind`: run deferred stage work (restoration of keyframes and previews) on a background
-        thread while the next frames are tracked (False: on this thread, right after the frame's tracking)."""
+        thread while the next frames are tracked (False: on this thread, right after the frame's tracking).
+        `on_step`: see `StepFn`."""
         self.camera, self.config, self.sequence = camera, config, sequence
+        self.on_step = on_step
         self.start, self.total, self.progress = start, total, progress
         self.parts: SlamParts = build_slam(camera, config)
         self.timer = StageTimer()
@@ -111,6 +119,8 @@ class PipelineRun:
         self.deferred.release(item.frame.index)  # its later frames have gone through the stages
         if self.progress is not None:
             self.progress(k + 1, self.total, "tracking")
+        if self.on_step is not None:
+            self.on_step(self, item.frame, inputs, res)
         return res
 
     def _frame_context(self) -> StageContext:
