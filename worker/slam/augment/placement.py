@@ -3,10 +3,12 @@
 Each walk lasts a few seconds. It starts just outside one side of the view at the start frame and ends just
 outside the other side at the end frame, at a distance in front of the camera chosen from the real scene depth
 (so the person is mostly in front of the furniture, sometimes behind a counter). People take turns: walker k's
-walks are shifted by a fraction of a walk so that one or two are usually in view.
+walks are shifted by a fraction of a walk so that one or two are usually in view. Static instances (a parked
+chair) are "walks" that start and end at the same floor point, in view of the camera somewhere in the sequence.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,9 +67,11 @@ def _anchor(T_WC: np.ndarray, floor: Floor, distance: float, lateral: float) -> 
 
 def plan_walks(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera: Camera, people: int,
                n_sprites: int, fps: float, rng: np.random.Generator,
-               cfg: PlacementConfig = PlacementConfig()) -> list[Walk]:
+               cfg: PlacementConfig = PlacementConfig(),
+               heights: Callable[[int], tuple[float, float]] | None = None) -> list[Walk]:
     """Walks covering the whole sequence: `poses` (N, 4, 4) T_WC, `center_depth` (N,) median depth (m) of the
-    middle of each frame (0 = unknown), `people` walkers taking turns."""
+    middle of each frame (0 = unknown), `people` walkers taking turns. `heights(sprite)`: the height range (m) of
+    a sprite's class (default `cfg.height_m`, people)."""
     n = len(poses)
     half_fov = camera.width / 2 / camera.fx  # tan of the half horizontal field of view
     known = center_depth[center_depth > 0]
@@ -89,7 +93,29 @@ def plan_walks(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera
                 # person crosses the view even while the camera pans.
                 start = _anchor(poses[a], floor, dist, -side * off)
                 end = _anchor(poses[b], floor, dist, side * off)
-                walks.append(Walk(k + 1, int(rng.integers(n_sprites)), a, b, start, end,
-                                  float(rng.uniform(*cfg.height_m))))
+                sprite = int(rng.integers(n_sprites))
+                height = float(rng.uniform(*(heights(sprite) if heights else cfg.height_m)))
+                walks.append(Walk(k + 1, sprite, a, b, start, end, height))
             frame = last + int(rng.uniform(0.0, 1.0) * fps)
     return walks
+
+
+def plan_static(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera: Camera, count: int,
+                first_id: int, n_sprites: int, rng: np.random.Generator, heights: Callable[[int], tuple[float, float]],
+                cfg: PlacementConfig = PlacementConfig()) -> list[Walk]:
+    """`count` instances that never move (ids `first_id`, `first_id + 1`, ...): instance j stands on the floor
+    in view of the camera at frame (j + 0.5) / count of the sequence (`poses` (N, 4, 4) T_WC, `center_depth` (N,)
+    as in `plan_walks`), at a distance chosen like a walk's and within the middle 60 % of the view's width."""
+    n = len(poses)
+    half_fov = camera.width / 2 / camera.fx
+    known = center_depth[center_depth > 0]
+    fallback = float(np.median(known)) if len(known) else 2.5
+    out = []
+    for j in range(count):
+        f = min(int((j + 0.5) / count * n), n - 1)
+        depth = float(center_depth[f]) if center_depth[f] > 0 else fallback
+        dist = float(np.clip(rng.uniform(*cfg.depth_fraction) * depth, *cfg.distance_m))
+        spot = _anchor(poses[f], floor, dist, float(rng.uniform(-0.6, 0.6)) * half_fov * dist)
+        sprite = int(rng.integers(n_sprites))
+        out.append(Walk(first_id + j, sprite, 0, n - 1, spot, spot.copy(), float(rng.uniform(*heights(sprite)))))
+    return out
