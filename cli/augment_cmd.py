@@ -27,6 +27,8 @@ def augment_command(
     static: Annotated[int, typer.Option(
         help="Instances of the --movers classes that stand still all sequence (a parked chair): part of the static "
              "scene and its truth background, never in truth/masks; their ids are in truth/static/.")] = 0,
+    static_classes: Annotated[str | None, typer.Option(
+        help="Classes of the --static instances, as --movers (default: the --movers classes).")] = None,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     camera: Annotated[str, typer.Option(
         help="Camera preset or JSON when the sequence has no camera.json.")] = "7scenes",
@@ -38,7 +40,8 @@ def augment_command(
     from worker.slam.camera import parse_camera
 
     cfg = AugmentConfig(frames=frames, people=people, seed=seed, camera=parse_camera(camera), movers=movers,
-                        static=static)
+                        static=static, static_classes=static_classes)
     with typer.progressbar(length=frames or 0, label="compositing", hidden=frames is None) as bar:
         result = generate_augmented(sequence_dir, people_from, out_dir, cfg, progress=lambda i, n: bar.update(1))
-    typer.echo(f"wrote {result.frames} frames to {result.root}; {coverage_summary(result.dynamic_fraction)}")
+    what = "people" if movers.strip().lower() == "person" else "movers"
+    typer.echo(f"wrote {result.frames} frames to {result.root}; {coverage_summary(result.dynamic_fraction, what=what)}")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -19,7 +20,15 @@ import numpy as np
 
 from worker.slam.augment.composite import Billboard, composite
 from worker.slam.augment.floor import Floor, backproject, estimate_floor, gravity_up, world_normals
-from worker.slam.augment.movers import COCO80, DEFAULT_MOVERS, PERSON, is_people_only, parse_movers
+from worker.slam.augment.movers import (
+    COCO80,
+    DEFAULT_MOVERS,
+    MOVER_CLASSES,
+    PERSON,
+    MoverClass,
+    is_people_only,
+    parse_movers,
+)
 from worker.slam.augment.placement import PlacementConfig, Walk, plan_static, plan_walks
 from worker.slam.augment.sprites import Sprite, SpriteFilter, load_sprites
 from worker.slam.camera import Camera
@@ -41,7 +50,9 @@ class AugmentConfig:
     movers: str = DEFAULT_MOVERS
     """Classes pasted: comma-separated groups (person, animal, vehicle, object) or COCO names (`movers.py`)."""
     static: int = 0
-    """Instances of the mover classes that stand still for the whole sequence (part of the static scene)."""
+    """Instances that stand still for the whole sequence (part of the static scene)."""
+    static_classes: str | None = None
+    """Their classes, as `movers` (None = the movers' classes)."""
     seed: int = 0
     """Seed of sprite choice, distances, timing."""
     camera: Camera | None = None
@@ -96,27 +107,45 @@ class AugmentedSequence:
             raise SequenceFormatError("every frame needs a ground-truth pose to place people in 3D",
                                       path=self.seq.root / "groundtruth.txt")
         self.n, self.poses = n, poses[:n]
+        # The movers' sprites first, so people-only walks draw from the same list as they always did.
+        self.static_classes = parse_movers(cfg.static_classes) if cfg.static_classes else self.classes
         self.sprites: list[Sprite] = load_sprites(coco_dir, cfg.sprites, tuple(m.coco_id for m in self.classes))
-        if not self.sprites:
-            what = ("whole-body person" if is_people_only(self.classes)
-                    else ", ".join(m.name for m in self.classes))
-            raise SequenceFormatError(f"no usable {what} instances", path=Path(coco_dir))
+        n_movers = len(self.sprites)
+        extra = tuple(m.coco_id for m in self.static_classes if m not in self.classes)
+        if extra and cfg.static:
+            self.sprites += load_sprites(coco_dir, cfg.sprites, extra)
+        for classes, pool in ((self.classes, self.sprites[:n_movers]),
+                              (self.static_classes if cfg.static else (), self.sprites)):
+            ids = {m.coco_id for m in classes}
+            if classes and not any(s.coco_id in ids for s in pool):
+                what = "whole-body person" if is_people_only(classes) else ", ".join(m.name for m in classes)
+                raise SequenceFormatError(f"no usable {what} instances", path=Path(coco_dir))
         rng = np.random.default_rng(cfg.seed)
         self.floor, centre = self._survey(rng)
         fps = (n - 1) / max(self.seq.timestamps[n - 1] - self.seq.timestamps[0], 1e-9) if n > 1 else 30.0
-        self.walks = plan_walks(self.poses, centre, self.floor, self.seq.camera, cfg.people, len(self.sprites),
-                                fps, rng, cfg.placement, self._heights)
+        self.walks = plan_walks(self.poses, centre, self.floor, self.seq.camera, cfg.people, n_movers, fps, rng,
+                                cfg.placement, self._heights,
+                                None if is_people_only(self.classes) else partial(self._pick, self.classes))
         # Their own random stream, so adding static instances leaves the walks as they were.
         self.statics = plan_static(self.poses, centre, self.floor, self.seq.camera, cfg.static, cfg.people + 1,
-                                   len(self.sprites), np.random.default_rng([cfg.seed, 1]), self._heights,
-                                   cfg.placement)
+                                   partial(self._pick, self.static_classes), np.random.default_rng([cfg.seed, 1]),
+                                   self._heights, cfg.placement)
+
+    def _pick(self, classes: tuple[MoverClass, ...], rng: np.random.Generator) -> int:
+        """A sprite index of one of `classes`: a class first (each class with sprites equally likely), then one of
+        its sprites, so the class with the most COCO128 instances does not crowd out the others."""
+        wanted = {m.coco_id for m in classes}
+        by_class: dict[int, list[int]] = {}
+        for k, s in enumerate(self.sprites):
+            if s.coco_id in wanted:
+                by_class.setdefault(s.coco_id, []).append(k)
+        members = list(by_class.values())[int(rng.integers(len(by_class)))]
+        return members[int(rng.integers(len(members)))]
 
     def _heights(self, sprite: int) -> tuple[float, float]:
         """Height range (m) of a sprite's class: people as `placement.height_m`, others their real size."""
         cls = self.sprites[sprite].coco_id
-        if cls == PERSON:
-            return self.cfg.placement.height_m
-        return next(m.height_m for m in self.classes if m.coco_id == cls)
+        return self.cfg.placement.height_m if cls == PERSON else MOVER_CLASSES[COCO80[cls]].height_m
 
     @property
     def extras(self) -> bool:

@@ -68,10 +68,11 @@ def _anchor(T_WC: np.ndarray, floor: Floor, distance: float, lateral: float) -> 
 def plan_walks(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera: Camera, people: int,
                n_sprites: int, fps: float, rng: np.random.Generator,
                cfg: PlacementConfig = PlacementConfig(),
-               heights: Callable[[int], tuple[float, float]] | None = None) -> list[Walk]:
+               heights: Callable[[int], tuple[float, float]] | None = None,
+               pick: Callable[[np.random.Generator], int] | None = None) -> list[Walk]:
     """Walks covering the whole sequence: `poses` (N, 4, 4) T_WC, `center_depth` (N,) median depth (m) of the
     middle of each frame (0 = unknown), `people` walkers taking turns. `heights(sprite)`: the height range (m) of
-    a sprite's class (default `cfg.height_m`, people)."""
+    a sprite's class (default `cfg.height_m`, people); `pick(rng)`: a sprite index (default: uniform)."""
     n = len(poses)
     half_fov = camera.width / 2 / camera.fx  # tan of the half horizontal field of view
     known = center_depth[center_depth > 0]
@@ -93,7 +94,7 @@ def plan_walks(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera
                 # person crosses the view even while the camera pans.
                 start = _anchor(poses[a], floor, dist, -side * off)
                 end = _anchor(poses[b], floor, dist, side * off)
-                sprite = int(rng.integers(n_sprites))
+                sprite = pick(rng) if pick else int(rng.integers(n_sprites))
                 height = float(rng.uniform(*(heights(sprite) if heights else cfg.height_m)))
                 walks.append(Walk(k + 1, sprite, a, b, start, end, height))
             frame = last + int(rng.uniform(0.0, 1.0) * fps)
@@ -101,11 +102,12 @@ def plan_walks(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera
 
 
 def plan_static(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera: Camera, count: int,
-                first_id: int, n_sprites: int, rng: np.random.Generator, heights: Callable[[int], tuple[float, float]],
-                cfg: PlacementConfig = PlacementConfig()) -> list[Walk]:
+                first_id: int, pick: Callable[[np.random.Generator], int], rng: np.random.Generator,
+                heights: Callable[[int], tuple[float, float]], cfg: PlacementConfig = PlacementConfig()) -> list[Walk]:
     """`count` instances that never move (ids `first_id`, `first_id + 1`, ...): instance j stands on the floor
     in view of the camera at frame (j + 0.5) / count of the sequence (`poses` (N, 4, 4) T_WC, `center_depth` (N,)
-    as in `plan_walks`), at a distance chosen like a walk's and within the middle 60 % of the view's width."""
+    as in `plan_walks`), at a distance chosen like a walk's and within the middle 60 % of the view's width;
+    `pick(rng)` chooses its sprite, `heights(sprite)` its height range (m)."""
     n = len(poses)
     half_fov = camera.width / 2 / camera.fx
     known = center_depth[center_depth > 0]
@@ -116,6 +118,6 @@ def plan_static(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camer
         depth = float(center_depth[f]) if center_depth[f] > 0 else fallback
         dist = float(np.clip(rng.uniform(*cfg.depth_fraction) * depth, *cfg.distance_m))
         spot = _anchor(poses[f], floor, dist, float(rng.uniform(-0.6, 0.6)) * half_fov * dist)
-        sprite = int(rng.integers(n_sprites))
+        sprite = pick(rng)
         out.append(Walk(first_id + j, sprite, 0, n - 1, spot, spot.copy(), float(rng.uniform(*heights(sprite)))))
     return out
