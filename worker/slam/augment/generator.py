@@ -274,8 +274,9 @@ def _info(aug: AugmentedSequence) -> dict:
         for w, d in zip(aug.walks, walks):
             d["class"] = aug.class_of(w)
         info.update({
-            "movers": [m.name for m in aug.classes], "classes_mask": "classes/{index:06d}.png",
-            "static_mask": "static/{index:06d}.png",
+            "movers": [m.name for m in aug.classes], "movers_spec": cfg.movers,
+            "classes_mask": "classes/{index:06d}.png", "static_mask": "static/{index:06d}.png",
+            "static_classes": [m.name for m in aug.static_classes],
             "static": [{"id": w.walker, "class": aug.class_of(w), "sprite": aug.sprites[w.sprite].source,
                         "height_m": w.height, "floor_point": w.start.tolist()} for w in aug.statics]})
     return info
