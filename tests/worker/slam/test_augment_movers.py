@@ -83,19 +83,20 @@ def test_moving_chair_has_an_exact_mask_and_class(chairs, static_source):
     assert seen >= 3
 
 
-def _world_centroid(seq: Sequence, index: int, mask: np.ndarray) -> np.ndarray:
-    """Mean world point (3,) of the pixels of `mask` with depth in frame `index`."""
+def _world_points(seq: Sequence, index: int, mask: np.ndarray) -> np.ndarray:
+    """(N, 3) world points of the pixels of `mask` with depth in frame `index`."""
     f, cam, T = seq[index], seq.camera, seq.groundtruth.poses[index]
     v, u = np.nonzero(mask & (f.depth > 0))
     z = f.depth[v, u]
     pc = np.stack([(u - cam.cx) / cam.fx * z, (v - cam.cy) / cam.fy * z, z], 1)
-    return (pc @ T[:3, :3].T + T[:3, 3]).mean(axis=0)
+    return pc @ T[:3, :3].T + T[:3, 3]
 
 
 def test_static_instance_stays_put_and_belongs_to_the_background(chairs):
     seq, truth, inst = Sequence(chairs), load_truth(chairs), InstanceTruth.of(chairs)
     gen = truth.layout.generator
     assert [s["class"] for s in gen["static"]] == ["chair"] and gen["static"][0]["id"] == 2
+    foot, facing = np.array(gen["static"][0]["floor_point"]), np.array(gen["static"][0]["facing"])
     static_pts, moving_pts = [], []
     for i in range(30):
         layers = inst[i]
@@ -105,13 +106,17 @@ def test_static_instance_stays_put_and_belongs_to_the_background(chairs):
         assert np.array_equal(seq[i].rgb[s], bg[s])  # the parked chair is part of the static scene
         assert np.array_equal(seq[i].rgb[~truth.mask(i)], bg[~truth.mask(i)])
         if s.sum() > 500:
-            static_pts.append(_world_centroid(seq, i, s))
+            pts = _world_points(seq, i, s)
+            # a rigid plane, fixed in the world: a billboard turning to the camera would leave it by ~10 cm
+            assert np.percentile(np.abs((pts - foot) @ facing), 95) < 0.01
+            static_pts.append(pts.mean(axis=0))
         if (layers.moving > 0).sum() > 500:
-            moving_pts.append(_world_centroid(seq, i, layers.moving > 0))
+            moving_pts.append(_world_points(seq, i, layers.moving > 0).mean(axis=0))
     assert len(static_pts) >= 5 and len(moving_pts) >= 3
     static_pts, moving_pts = np.array(static_pts), np.array(moving_pts)
-    # the parked chair's visible surface stays within a few cm in the world; the moving one crosses the room
-    assert np.linalg.norm(static_pts - static_pts.mean(0), axis=1).max() < 0.1
+    # the parked chair's visible surface stays within a cm or two in the world (unless a mover hides part of it);
+    # the moving one crosses the room
+    assert np.median(np.linalg.norm(static_pts - np.median(static_pts, axis=0), axis=1)) < 0.02
     assert np.linalg.norm(moving_pts.max(0) - moving_pts.min(0)) > 0.5
 
 

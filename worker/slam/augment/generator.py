@@ -190,9 +190,10 @@ class AugmentedSequence:
         active.sort(key=lambda w: -np.linalg.norm(w.position(i) - T[:3, 3]))
         for w in active:
             foot = w.position(i) + w.bob(i) * self.floor.up
-            bulge = min(0.12, 0.3 * w.height)  # a body rounds 12 cm; a cat less
+            # A body rounds 12 cm (a cat less) towards the camera; a static instance stays a flat, rigid plane.
+            bulge = 0.0 if w.facing is not None else min(0.12, 0.3 * w.height)
             composite(rgb, depth, ids, self.seq.camera, T, self.floor,
-                      Billboard(self.sprites[w.sprite], foot, w.height, bulge), w.walker)
+                      Billboard(self.sprites[w.sprite], foot, w.height, bulge, w.facing), w.walker)
 
     def layers(self, i: int) -> AugmentedFrame:
         """Frame `i` with its truth layers: the static instances pasted into the source (the background), then
@@ -278,5 +279,6 @@ def _info(aug: AugmentedSequence) -> dict:
             "classes_mask": "classes/{index:06d}.png", "static_mask": "static/{index:06d}.png",
             "static_classes": [m.name for m in aug.static_classes],
             "static": [{"id": w.walker, "class": aug.class_of(w), "sprite": aug.sprites[w.sprite].source,
-                        "height_m": w.height, "floor_point": w.start.tolist()} for w in aug.statics]})
+                        "height_m": w.height, "floor_point": w.start.tolist(), "facing": w.facing.tolist()}
+                       for w in aug.statics]})
     return info

@@ -35,7 +35,8 @@ class PlacementConfig:
 
 @dataclass(frozen=True)
 class Walk:
-    """One walk of sprite `sprite` from floor point `start` (3,) to `end` (3,) over frames `first`..`last`."""
+    """One walk of sprite `sprite` from floor point `start` (3,) to `end` (3,) over frames `first`..`last`;
+    `facing` (3,) a fixed horizontal world normal for a static instance (None: it turns to the camera)."""
 
     walker: int
     sprite: int
@@ -44,6 +45,7 @@ class Walk:
     start: np.ndarray
     end: np.ndarray
     height: float
+    facing: np.ndarray | None = None
 
     def position(self, frame: int) -> np.ndarray:
         """Floor point under the person at `frame` (smooth start and stop)."""
@@ -106,8 +108,9 @@ def plan_static(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camer
                 heights: Callable[[int], tuple[float, float]], cfg: PlacementConfig = PlacementConfig()) -> list[Walk]:
     """`count` instances that never move (ids `first_id`, `first_id + 1`, ...): instance j stands on the floor
     in view of the camera at frame (j + 0.5) / count of the sequence (`poses` (N, 4, 4) T_WC, `center_depth` (N,)
-    as in `plan_walks`), at a distance chosen like a walk's and within the middle 60 % of the view's width;
-    `pick(rng)` chooses its sprite, `heights(sprite)` its height range (m)."""
+    as in `plan_walks`), at a distance chosen like a walk's and within the middle 60 % of the view's width, facing
+    that camera within 40 degrees, and keeping that orientation; `pick(rng)` chooses its sprite, `heights(sprite)`
+    its height range (m)."""
     n = len(poses)
     half_fov = camera.width / 2 / camera.fx
     known = center_depth[center_depth > 0]
@@ -119,5 +122,14 @@ def plan_static(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camer
         dist = float(np.clip(rng.uniform(*cfg.depth_fraction) * depth, *cfg.distance_m))
         spot = _anchor(poses[f], floor, dist, float(rng.uniform(-0.6, 0.6)) * half_fov * dist)
         sprite = pick(rng)
-        out.append(Walk(first_id + j, sprite, 0, n - 1, spot, spot.copy(), float(rng.uniform(*heights(sprite)))))
+        height = float(rng.uniform(*heights(sprite)))
+        facing = _yawed(poses[f][:3, 3] - spot, floor.up, np.radians(rng.uniform(-40.0, 40.0)))
+        out.append(Walk(first_id + j, sprite, 0, n - 1, spot, spot.copy(), height, facing))
     return out
+
+
+def _yawed(v: np.ndarray, up: np.ndarray, angle: float) -> np.ndarray:
+    """Horizontal unit vector (3,): `v` (3,) without its `up` component, turned by `angle` rad about `up`."""
+    h = v - (v @ up) * up
+    h /= max(np.linalg.norm(h), 1e-9)
+    return h * np.cos(angle) + np.cross(up, h) * np.sin(angle)
