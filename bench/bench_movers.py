@@ -48,6 +48,8 @@ def run_row(run_dir: str, camera: str, preset: str, max_frames: int | None, over
     ct = m.get("culling", {}).get("truth", {})
     return {"preset": preset, "frames": m["frames"], "tracked": m["tracked"], "ate": m.get("ate", {}).get("rmse"),
             "precision": ct.get("feature_precision"), "recall": ct.get("feature_recall"),
+            "missed_seg": ct.get("feature_missed_by_segmentation"),
+            "marked": m.get("stage_info", {}).get("potentially_dynamic_fraction"),
             "inst": m.get(InstanceScoreStage.name)}
 
 
@@ -79,6 +81,13 @@ def _ref_ate(rows: list[dict], sequence: str) -> float | None:
     return next((r["ate"] for r in rows if r["sequence"] == sequence and r["preset"] == REFERENCE), None)
 
 
+def print_header() -> None:
+    print("| sequence | movers | preset | tracked | ATE rmse (m) | × mover-free | dyn. precision | dyn. recall "
+          "| moving kp removed | static kp removed | scene kp removed | static kp | moving removed by class "
+          "| marked area | dyn. kp never marked |")
+    print("|" + "---|" * 15)
+
+
 def print_row(r: dict, rows: list[dict]) -> None:
     inst = r["inst"] or {}
     ref = _ref_ate(rows, r["sequence"])
@@ -89,7 +98,7 @@ def print_row(r: dict, rows: list[dict]) -> None:
           f"{_fmt(ratio, 2)} | {_fmt(r['precision'], 2)} | {_fmt(r['recall'], 2)} | "
           f"{_fmt(inst.get('moving_removed'), 1, True)} | {_fmt(inst.get('static_removed'), 1, True)} | "
           f"{_fmt(inst.get('scene_removed'), 1, True)} | {inst.get('keypoints', {}).get('static', '–')} | "
-          f"{by_class} |", flush=True)
+          f"{by_class} | {_fmt(r.get('marked'), 1, True)} | {_fmt(r.get('missed_seg'), 1, True)} |", flush=True)
 
 
 def print_summary(rows: list[dict]) -> None:
@@ -129,6 +138,7 @@ def main() -> None:
     args = ap.parse_args()
     if args.from_json:
         rows = [r for f in args.from_json for r in json.loads(Path(f).read_text())]
+        print_header()
         for r in rows:
             print_row(r, rows)
         print_summary(rows)
@@ -136,9 +146,7 @@ def main() -> None:
     if not args.sequence:
         ap.error("give --sequence DIR:CAMERA or --from-json FILE")
     overrides = json.loads(args.config) if args.config else None
-    print("| sequence | movers | preset | tracked | ATE rmse (m) | × mover-free | dyn. precision | dyn. recall "
-          "| moving kp removed | static kp removed | scene kp removed | static kp | moving removed by class |")
-    print("|" + "---|" * 13)
+    print_header()
     rows = []
     for spec in args.sequence:
         rows += sequence_rows(spec, args.presets.split(","), args.max_frames, overrides)
