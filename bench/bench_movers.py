@@ -2,15 +2,19 @@
 frames without movers, and culling per instance (moving vs static instances of potentially dynamic classes).
 
     .venv/bin/python bench/bench_movers.py --sequence AUG_DIR:7scenes [--sequence ...] \
-        [--presets orb-only,geometry-only,no-restoration] [--max-frames 300] [--config JSON]
+        [--presets orb-only,geometry-only,no-restoration] [--max-frames 300] [--config JSON] [--oracle] \
+        [--json FILE]
+    .venv/bin/python bench/bench_movers.py --from-json FILE [FILE ...]
 
 AUG_DIR comes from `vtdslam augment` (`--movers animal --static 2`, or the people of the default). Each
 sequence also gets a `mover-free` row: `orb-only` on its truth backgrounds (the same frames without the movers,
 static instances included), the denominator of the issue's "ATE <= 1.2x people-free". With per-instance truth
 (movers other than people, or `--static`), the rows add the shares of keypoints culling removed on moving
 instances, on static instances and on the source scene (`worker.slam.augment.instance_scores`), and which
-classes' movers it caught. The summary gives, per kind of movers and preset, the mean ATE, the ratio of means
-to `mover-free`, the worst sequence's ratio and the mean shares. Benchmarks print figures; they assert nothing.
+classes' movers it caught. `--oracle` adds `no-restoration` with a segmentation that marks every pasted pixel
+(moving and static instances), the bound a multi-class network could reach. The summary gives, per kind of
+movers and preset, the mean ATE, the ratio of means to `mover-free`, the worst sequence's ratio and the mean
+shares. Benchmarks print figures; they assert nothing.
 """
 from __future__ import annotations
 
@@ -32,6 +36,30 @@ from worker.slam.presets import get_preset  # noqa: E402
 from worker.slam.truth import load_truth, write_background_sequence  # noqa: E402
 
 REFERENCE = "mover-free"
+ORACLE = "no-restoration, class oracle"
+#: The oracle row: segmentation replaced by the truth (here: every pasted pixel, moving or static).
+ORACLE_CONFIG = {"segmentation": {"source": "truth"}}
+
+
+def oracle_copy(seq_dir: str, out: Path) -> str:
+    """A view of `seq_dir` whose truth masks mark every pasted pixel (moving and static instances): what a
+    segmenter that knew every mover class would mark potentially dynamic. Frames and backgrounds are linked."""
+    import cv2
+
+    src = Path(seq_dir)
+    out.mkdir(parents=True)
+    for p in src.iterdir():
+        if p.name != "truth":
+            (out / p.name).symlink_to(p.resolve())
+    (out / "truth").mkdir()
+    for p in (src / "truth").iterdir():
+        if p.name != "masks":
+            (out / "truth" / p.name).symlink_to(p.resolve())
+    (out / "truth" / "masks").mkdir()
+    inst = InstanceTruth.of(src)
+    for i in range(len(inst.truth)):
+        cv2.imwrite(str(out / "truth" / inst.truth.layout.mask.format(index=i)), inst[i].classes)
+    return str(out)
 
 
 def run_row(run_dir: str, camera: str, preset: str, max_frames: int | None, overrides: dict | None,
@@ -53,8 +81,10 @@ def run_row(run_dir: str, camera: str, preset: str, max_frames: int | None, over
             "inst": m.get(InstanceScoreStage.name)}
 
 
-def sequence_rows(spec: str, presets: list[str], max_frames: int | None, overrides: dict | None) -> list[dict]:
-    """The preset rows and the mover-free row of one `DIR:CAMERA`."""
+def sequence_rows(spec: str, presets: list[str], max_frames: int | None, overrides: dict | None,
+                  oracle: bool = False, reference: bool = True) -> list[dict]:
+    """The preset rows and the mover-free row of one `DIR:CAMERA` (and the class oracle's, with per-instance
+    truth and `oracle`)."""
     seq_dir, _, camera = spec.rpartition(":")
     truth = load_truth(seq_dir)
     if truth is None:
@@ -64,9 +94,17 @@ def sequence_rows(spec: str, presets: list[str], max_frames: int | None, overrid
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         bg = str(write_background_sequence(seq_dir, Path(tmp) / "bg"))
-        for run_dir, preset, label in [(bg, "orb-only", REFERENCE)] + [(seq_dir, p, p) for p in presets]:
+        refs = [(bg, "orb-only", REFERENCE)] if reference else []
+        for run_dir, preset, label in refs + [(seq_dir, p, p) for p in presets]:
             r = run_row(run_dir, camera, preset, max_frames, overrides, instances if run_dir == seq_dir else None)
             rows.append({**r, "preset": label, "sequence": Path(seq_dir).name, "movers": kind})
+            print_row(rows[-1], rows)
+        if oracle and instances is not None:
+            r = run_row(oracle_copy(seq_dir, Path(tmp) / "oracle"), camera, "no-restoration",
+                        max_frames, {**(overrides or {}), **ORACLE_CONFIG}, instances)
+            # its truth scores are against every pasted pixel: only the per-instance shares mean what they say
+            rows.append({**r, "precision": None, "recall": None, "missed_seg": None, "preset": ORACLE,
+                         "sequence": Path(seq_dir).name, "movers": kind})
             print_row(rows[-1], rows)
     return rows
 
@@ -132,6 +170,11 @@ def main() -> None:
     ap.add_argument("--presets", default="orb-only,geometry-only,no-restoration")
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--config", default=None, help="JSON overrides applied to every run")
+    ap.add_argument("--oracle", action="store_true",
+                    help=f"also run `{ORACLE}`: no-restoration with every pasted pixel (moving or static) as its "
+                         "segmentation, what a network that knew every mover class would give")
+    ap.add_argument("--no-reference", action="store_true",
+                    help="skip the mover-free row (an --oracle run read with --from-json beside one that ran it)")
     ap.add_argument("--json", default=None, metavar="FILE", help="also write the rows to FILE")
     ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
                     help="print the table and summary of rows saved by earlier --json runs instead of running")
@@ -149,7 +192,8 @@ def main() -> None:
     print_header()
     rows = []
     for spec in args.sequence:
-        rows += sequence_rows(spec, args.presets.split(","), args.max_frames, overrides)
+        rows += sequence_rows(spec, [p for p in args.presets.split(",") if p], args.max_frames, overrides,
+                              args.oracle, not args.no_reference)
     print_summary(rows)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
