@@ -139,16 +139,18 @@ def test_people_default_writes_what_it_always_wrote(static_source, coco, tmp_pat
 
 
 def test_instance_counts_split_moving_static_and_scene():
-    moving = np.zeros((40, 40), np.uint8)
+    moving = np.zeros((60, 60), np.uint8)
     moving[5:15, 5:15] = 1
     static = np.zeros_like(moving)
-    static[25:35, 25:35] = 2
+    static[25:55, 25:55] = 2
     classes = np.where(moving > 0, COCO80.index("dog") + 1, 0) + np.where(static > 0, CHAIR + 1, 0)
-    uv = np.array([[10, 10], [12, 8], [30, 30], [28, 27], [2, 35], [37, 3], [16, 10]], float)
-    culled = np.array([True, False, False, True, True, False, True])
+    # moving: 2 (1 removed); static: an edge one removed, an interior one kept; scene: 2 (1 removed); (16, 10)
+    # lies within 3 px of the dog: neither moving nor scene
+    uv = np.array([[10, 10], [12, 8], [27, 30], [40, 40], [2, 35], [57, 3], [16, 10]], float)
+    culled = np.array([True, False, True, False, True, False, True])
     counts = InstanceCounts()
     counts.add(InstanceLayers(moving, static, classes.astype(np.uint8)), uv, culled, border_px=3)
     s = counts.summary()
-    assert s["moving_by_class"] == {"dog": {"removed": 0.5, "keypoints": 2}}
-    assert s["static_removed"] == 0.5 and s["scene_removed"] == 0.5  # (16, 10) is within 3 px: neither
-    assert s["keypoints"] == {"moving": 2, "static": 2, "scene": 2}
+    assert s["moving_by_class"] == {"dog": {"removed": 0.5, "keypoints": 2}} and s["moving_removed"] == 0.5
+    assert s["static_removed"] == 0.5 and s["static_interior_removed"] == 0.0 and s["scene_removed"] == 0.5
+    assert s["keypoints"] == {"moving": 2, "static": 2, "static_interior": 1, "scene": 2}

@@ -21,6 +21,8 @@ from worker.slam.io.sequence import Frame
 from worker.slam.stages import FrameInputs, StageContext
 from worker.slam.truth import Truth, load_truth
 
+INTERIOR_PX = 8
+
 
 @dataclass(frozen=True)
 class InstanceLayers:
@@ -70,6 +72,9 @@ class InstanceCounts:
     """class name -> [removed, kept] on moving instances."""
     static: list[int] = field(default_factory=lambda: [0, 0])
     """[removed, kept] on static instances."""
+    static_interior: list[int] = field(default_factory=lambda: [0, 0])
+    """[removed, kept] on static instances at least `INTERIOR_PX` inside their silhouette (a corner on the
+    silhouette mixes the instance with the scene behind it, which parallax moves)."""
     scene: list[int] = field(default_factory=lambda: [0, 0])
     """[removed, kept] on the source scene, more than `border_px` from any pasted pixel."""
 
@@ -81,12 +86,14 @@ class InstanceCounts:
         cls, moving, static = layers.classes[y, x], layers.moving[y, x] > 0, layers.static[y, x] > 0
         pasted = cv2.dilate((layers.classes > 0).astype(np.uint8), np.ones((2 * border_px + 1,) * 2, np.uint8))
         scene = pasted[y, x] == 0
+        k = 2 * INTERIOR_PX + 1
+        interior = static & (cv2.erode((layers.static > 0).astype(np.uint8), np.ones((k, k), np.uint8))[y, x] > 0)
         for c in np.unique(cls[moving]):
             on = moving & (cls == c)
             pair = self.moving.setdefault(COCO80[int(c) - 1], [0, 0])
             pair[0] += int((on & culled).sum())
             pair[1] += int((on & ~culled).sum())
-        for pair, on in ((self.static, static), (self.scene, scene)):
+        for pair, on in ((self.static, static), (self.static_interior, interior), (self.scene, scene)):
             pair[0] += int((on & culled).sum())
             pair[1] += int((on & ~culled).sum())
 
@@ -97,10 +104,11 @@ class InstanceCounts:
 
         moved = [sum(p[0] for p in self.moving.values()), sum(p[1] for p in self.moving.values())]
         return {"moving_removed": share(moved), "static_removed": share(self.static),
-                "scene_removed": share(self.scene),
+                "static_interior_removed": share(self.static_interior), "scene_removed": share(self.scene),
                 "moving_by_class": {k: {"removed": share(v), "keypoints": sum(v)}
                                     for k, v in sorted(self.moving.items())},
-                "keypoints": {"moving": sum(moved), "static": sum(self.static), "scene": sum(self.scene)}}
+                "keypoints": {"moving": sum(moved), "static": sum(self.static),
+                              "static_interior": sum(self.static_interior), "scene": sum(self.scene)}}
 
 
 class InstanceScoreStage:
