@@ -140,5 +140,18 @@ for rank in 1 2; do
     .venv/bin/vtdslam compress-msnet "$BENCH_DIR/msnet_dense.pt" "$BENCH_DIR/msnet_r$rank.pt" --rank "$rank"
 done
 for ckpt in dense r1 r2; do $PY bench/bench_msnet.py --threads 1 --checkpoint "$BENCH_DIR/msnet_$ckpt.pt"; done
+echo "## non-person movers (animals; vehicles and objects; parked objects beside them) next to the people seeds 0-3"
+MOVERS=()
+for seed in 0 1 2 3; do
+    for kind in animal vehicle,object; do
+        .venv/bin/vtdslam augment "$SHARED/data/7scenes_redkitchen" --people-from "$SHARED/data/coco128_seg" \
+            "$BENCH_DIR/movers_${kind/,/_}_s$seed" --frames 300 --seed "$seed" --movers "$kind" --static 2 \
+            --static-classes object > /dev/null
+        MOVERS+=(--sequence "$BENCH_DIR/movers_${kind/,/_}_s$seed:7scenes")
+    done
+done
+$PY bench/bench_movers.py "${MOVERS[@]}" --presets orb-only,geometry-only,no-restoration,full --max-frames 300
+$PY bench/bench_movers.py $(for seed in 0 1 2 3; do echo --sequence "$BENCH_DIR/aug_s$seed:7scenes"; done) \
+    --presets no-restoration,full --max-frames 300
 echo "## generators"; $PY bench/bench_generators.py --frames 90
 echo "## upload"; $PY bench/bench_upload.py

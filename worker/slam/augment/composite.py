@@ -1,9 +1,11 @@
 """Pasting a cut-out person into a real RGB-D frame as a vertical billboard standing on the floor.
 
-The billboard turns to face the camera; its silhouette edge is blended over the pixels it covers (only
-pixels inside the mask change, so the truth stays exact); its depth is the plane's depth, rounded by up to
-`bulge_m` towards the camera inside the silhouette (a body is not flat). The person is drawn only where it
-is nearer than the real depth (or the real depth is unknown), and there its depth replaces the real one.
+A mover's billboard turns to face the camera; a static instance's keeps the orientation it was given (a rigid
+object: a billboard that turned would swim against the scene and rightly look dynamic). Its silhouette edge is
+blended over the pixels it covers (only pixels inside the mask change, so the truth stays exact); its depth is
+the plane's depth, rounded by up to `bulge_m` towards the camera inside the silhouette (a body is not flat).
+The person is drawn only where it is nearer than the real depth (or the real depth is unknown), and there its
+depth replaces the real one.
 """
 from __future__ import annotations
 
@@ -21,12 +23,14 @@ NEAR = 0.2  # m: a billboard corner nearer than this (or behind the camera) is n
 
 @dataclass(frozen=True)
 class Billboard:
-    """A person of `height` metres whose feet are at floor point `foot` (3,), world frame."""
+    """A person of `height` metres whose feet are at floor point `foot` (3,), world frame; `facing` (3,) a fixed
+    horizontal unit normal in the world (None: it turns towards the camera)."""
 
     sprite: Sprite
     foot: np.ndarray
     height: float
     bulge_m: float = 0.12
+    facing: np.ndarray | None = None
 
 
 def _light_gain(frame_rgb: np.ndarray, region: tuple[slice, slice], sprite: Sprite) -> float:
@@ -44,6 +48,8 @@ def composite(rgb: np.ndarray, depth_u16: np.ndarray, ids: np.ndarray, camera: C
     to_cam = C - person.foot
     to_cam -= (to_cam @ floor.up) * floor.up
     n = to_cam / max(np.linalg.norm(to_cam), 1e-9)  # billboard normal, horizontal, towards the camera
+    if person.facing is not None:
+        n = person.facing  # rigid: seen from behind, the same plane shows its mirror image
     right = np.cross(floor.up, n)  # image right of the sprite as seen from the camera
     w = person.height * person.sprite.aspect
     top = person.foot + person.height * floor.up

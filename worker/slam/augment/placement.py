@@ -3,10 +3,12 @@
 Each walk lasts a few seconds. It starts just outside one side of the view at the start frame and ends just
 outside the other side at the end frame, at a distance in front of the camera chosen from the real scene depth
 (so the person is mostly in front of the furniture, sometimes behind a counter). People take turns: walker k's
-walks are shifted by a fraction of a walk so that one or two are usually in view.
+walks are shifted by a fraction of a walk so that one or two are usually in view. Static instances (a parked
+chair) are "walks" that start and end at the same floor point, in view of the camera somewhere in the sequence.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,7 +35,8 @@ class PlacementConfig:
 
 @dataclass(frozen=True)
 class Walk:
-    """One walk of sprite `sprite` from floor point `start` (3,) to `end` (3,) over frames `first`..`last`."""
+    """One walk of sprite `sprite` from floor point `start` (3,) to `end` (3,) over frames `first`..`last`;
+    `facing` (3,) a fixed horizontal world normal for a static instance (None: it turns to the camera)."""
 
     walker: int
     sprite: int
@@ -42,6 +45,7 @@ class Walk:
     start: np.ndarray
     end: np.ndarray
     height: float
+    facing: np.ndarray | None = None
 
     def position(self, frame: int) -> np.ndarray:
         """Floor point under the person at `frame` (smooth start and stop)."""
@@ -65,9 +69,12 @@ def _anchor(T_WC: np.ndarray, floor: Floor, distance: float, lateral: float) -> 
 
 def plan_walks(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera: Camera, people: int,
                n_sprites: int, fps: float, rng: np.random.Generator,
-               cfg: PlacementConfig = PlacementConfig()) -> list[Walk]:
+               cfg: PlacementConfig = PlacementConfig(),
+               heights: Callable[[int], tuple[float, float]] | None = None,
+               pick: Callable[[np.random.Generator], int] | None = None) -> list[Walk]:
     """Walks covering the whole sequence: `poses` (N, 4, 4) T_WC, `center_depth` (N,) median depth (m) of the
-    middle of each frame (0 = unknown), `people` walkers taking turns."""
+    middle of each frame (0 = unknown), `people` walkers taking turns. `heights(sprite)`: the height range (m) of
+    a sprite's class (default `cfg.height_m`, people); `pick(rng)`: a sprite index (default: uniform)."""
     n = len(poses)
     half_fov = camera.width / 2 / camera.fx  # tan of the half horizontal field of view
     known = center_depth[center_depth > 0]
@@ -89,7 +96,40 @@ def plan_walks(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera
                 # person crosses the view even while the camera pans.
                 start = _anchor(poses[a], floor, dist, -side * off)
                 end = _anchor(poses[b], floor, dist, side * off)
-                walks.append(Walk(k + 1, int(rng.integers(n_sprites)), a, b, start, end,
-                                  float(rng.uniform(*cfg.height_m))))
+                sprite = pick(rng) if pick else int(rng.integers(n_sprites))
+                height = float(rng.uniform(*(heights(sprite) if heights else cfg.height_m)))
+                walks.append(Walk(k + 1, sprite, a, b, start, end, height))
             frame = last + int(rng.uniform(0.0, 1.0) * fps)
     return walks
+
+
+def plan_static(poses: np.ndarray, center_depth: np.ndarray, floor: Floor, camera: Camera, count: int,
+                first_id: int, pick: Callable[[np.random.Generator], int], rng: np.random.Generator,
+                heights: Callable[[int], tuple[float, float]], cfg: PlacementConfig = PlacementConfig()) -> list[Walk]:
+    """`count` instances that never move (ids `first_id`, `first_id + 1`, ...): instance j stands on the floor
+    in view of the camera at frame (j + 0.5) / count of the sequence (`poses` (N, 4, 4) T_WC, `center_depth` (N,)
+    as in `plan_walks`), at a distance chosen like a walk's and within the middle 60 % of the view's width, facing
+    that camera within 40 degrees, and keeping that orientation; `pick(rng)` chooses its sprite, `heights(sprite)`
+    its height range (m)."""
+    n = len(poses)
+    half_fov = camera.width / 2 / camera.fx
+    known = center_depth[center_depth > 0]
+    fallback = float(np.median(known)) if len(known) else 2.5
+    out = []
+    for j in range(count):
+        f = min(int((j + 0.5) / count * n), n - 1)
+        depth = float(center_depth[f]) if center_depth[f] > 0 else fallback
+        dist = float(np.clip(rng.uniform(*cfg.depth_fraction) * depth, *cfg.distance_m))
+        spot = _anchor(poses[f], floor, dist, float(rng.uniform(-0.6, 0.6)) * half_fov * dist)
+        sprite = pick(rng)
+        height = float(rng.uniform(*heights(sprite)))
+        facing = _yawed(poses[f][:3, 3] - spot, floor.up, np.radians(rng.uniform(-40.0, 40.0)))
+        out.append(Walk(first_id + j, sprite, 0, n - 1, spot, spot.copy(), height, facing))
+    return out
+
+
+def _yawed(v: np.ndarray, up: np.ndarray, angle: float) -> np.ndarray:
+    """Horizontal unit vector (3,): `v` (3,) without its `up` component, turned by `angle` rad about `up`."""
+    h = v - (v @ up) * up
+    h /= max(np.linalg.norm(h), 1e-9)
+    return h * np.cos(angle) + np.cross(up, h) * np.sin(angle)
