@@ -10,7 +10,6 @@ from worker.slam.evaluation.metrics import evaluate
 from worker.slam.geometry.se3 import exp_se3, inv
 from worker.slam.io.trajectory import Trajectory
 from worker.slam.mapping.loop_closure import LoopCloser
-from worker.slam.mapping.place_recognition import PlaceRecognizer
 from worker.slam.mapping.pose_graph import optimize_pose_graph
 from worker.slam.presets import get_preset
 from worker.slam.run.parts import build_slam
@@ -55,19 +54,6 @@ def test_pose_graph_edge_without_translation_weight_constrains_rotation_only():
         assert np.allclose(out[1][:3, :3], strong[:3, :3], atol=2e-3)
     assert np.allclose(rot_only[1][:3, 3], odometry[:3, 3], atol=1e-3)  # its translation is not weighed
     assert np.allclose(both[1][:3, 3], strong[:3, 3], atol=0.02)
-
-
-def test_place_recognition_scores_revisits_highest():
-    rng = np.random.default_rng(0)
-    places = [rng.integers(0, 256, (400, 32), dtype=np.uint8) for _ in range(8)]
-    pr = PlaceRecognizer(400)
-    for d in places:
-        pr.add(d, rng.random(len(d)).astype(np.float32))
-    revisit = places[2].copy()
-    revisit[:, 0] ^= 1  # nearly the same descriptors
-    pr.add(revisit, np.ones(len(revisit), np.float32))
-    s = pr.scores(8)
-    assert int(np.argmax(s[:8])) == 2
 
 
 @pytest.fixture(scope="module")
