@@ -95,3 +95,24 @@ def test_loop_detected_and_applied_on_a_rendered_turn(turn_run):
     rel = inv(kfs[cand].T_WC) @ kfs[cur].T_WC
     rel_gt = inv(poses[kfs[cand].frame_index]) @ poses[kfs[cur].frame_index]
     assert np.linalg.norm(rel[:3, 3] - rel_gt[:3, 3]) < 0.01
+
+
+def test_a_sequence_without_revisits_closes_no_loop():
+    """A sweep along the room that never comes back: whatever the vocabulary proposes, no loop is closed."""
+    n = 70
+    poses = np.stack([pose([-0.6 + 1.2 * i / n, 0.0, 0.3 * np.sin(i / n * np.pi)], 200.0 * i / n - 100.0, -10)
+                      for i in range(n)])
+    cfg = get_preset("orb-only", {"loop": {"min_keyframe_gap": 6, "min_correction_m": 0.0, "consistency": 1},
+                                  "tracking": {"keyframe_max_frames": 5, "virtual_baseline_m": 0.08}})
+    parts = build_slam(CAM, cfg)
+    closer = LoopCloser(parts.map, cfg.loop, parts.sensor)
+    for i, T in enumerate(poses):
+        rgb, depth = render(T)
+        res = parts.tracker.track(i, i / 30, rgb, depth)
+        assert res.ok
+        if res.keyframe is not None:
+            parts.mapper.process(res.keyframe)
+            closer.process(res.keyframe)
+            parts.tracker.on_map_updated(res)
+    assert len(parts.map) >= 12  # enough keyframes past the gap for detection to run
+    assert closer.n_loops == 0 and closer.n_applied == 0 and not closer.loop_edges

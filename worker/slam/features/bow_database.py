@@ -46,8 +46,7 @@ class KeyframeDatabase:
         """(tf-idf vector, (N,) direct-index node per descriptor) of an image's (N,32) uint8 descriptors."""
         if len(desc) == 0:
             return self.vocab.bow(desc), np.zeros(0, np.int64)
-        leaf = self.vocab.descend(desc)
-        node = self.vocab.descend(desc, stop_depth=self.direct_depth)  # the leaf's ancestor at that depth
+        leaf, node = self.vocab.descend_both(desc, self.direct_depth)  # node: the leaf's ancestor at that depth
         return self.vocab.bow_of_words(self.vocab.word_of[leaf]), node
 
     def _csc(self) -> sp.csc_matrix:

@@ -65,11 +65,18 @@ class Vocabulary:
 
     def descend(self, desc: np.ndarray, stop_depth: int | None = None) -> np.ndarray:
         """(N,) node id each (N,32) uint8 descriptor reaches: its leaf, or its node at `stop_depth`."""
+        return self.descend_both(desc, 0 if stop_depth is None else stop_depth, stop_depth)[0]
+
+    def descend_both(self, desc: np.ndarray, mid_depth: int, stop_depth: int | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """((N,) leaf or node at `stop_depth`, (N,) node at `mid_depth`) of (N,32) uint8 descriptors, in one
+        descent (the second is the direct index's node)."""
         node = np.zeros(len(desc), np.int64)
+        mid = node
         desc = np.ascontiguousarray(desc, np.uint8).view(np.uint64)  # 4 words per ORB descriptor
         centres = self.centres.view(np.uint64)
         last = self.levels if stop_depth is None else stop_depth
-        for _ in range(last):
+        for level in range(last):
             ch = self.children[node]  # (N, k)
             valid = ch >= 0
             inner = valid.any(1)
@@ -79,7 +86,9 @@ class Vocabulary:
             dist[~valid] = 1 << 20
             best = ch[np.arange(len(ch)), dist.argmin(1)]
             node = np.where(inner, best, node)
-        return node
+            if level + 1 == mid_depth:
+                mid = node
+        return node, mid
 
     def words(self, desc: np.ndarray) -> np.ndarray:
         """(N,) word id of each (N,32) uint8 descriptor."""
