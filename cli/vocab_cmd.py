@@ -31,7 +31,10 @@ def train_vocab_command(
     if images is None:
         shared = Path(get_settings().shared_dir) / "data"
         images = [shared / "coco128_seg" / "images", shared / "ccp_persons" / "images"]
-    paths = image_paths(images, every)
+    try:
+        paths = image_paths(images, every)
+    except (ValueError, FileNotFoundError) as exc:
+        raise typer.BadParameter(str(exc), param_hint="--images") from exc
     if not paths:
         raise typer.BadParameter("no images found", param_hint="--images")
     cfg = VocabTrainConfig(k=k, levels=levels, max_descriptors=max_descriptors, seed=seed)
