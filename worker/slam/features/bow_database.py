@@ -23,7 +23,6 @@ class KeyframeDatabase:
         self.direct_depth = min(direct_depth, vocab.levels)
         self.bows: list[BowVector] = []
         self.nodes: list[np.ndarray] = []  # per keyframe (N,) direct-index node of each descriptor
-        self._rows: list[np.ndarray] = []
         self._matrix: sp.csc_matrix | None = None
 
     def __len__(self) -> int:
@@ -50,11 +49,12 @@ class KeyframeDatabase:
         return self.vocab.bow_of_words(self.vocab.word_of[leaf]), node
 
     def _csc(self) -> sp.csc_matrix:
-        if self._matrix is None or self._matrix.shape[0] != len(self.bows):
+        """The keyframe x word matrix (the inverted file), rebuilt after keyframes were added."""
+        if self._matrix is None:
             n = len(self.bows)
-            rows = np.concatenate([np.full(len(b.words), i) for i, b in enumerate(self.bows)]) if n else []
-            cols = np.concatenate([b.words for b in self.bows]) if n else []
-            vals = np.concatenate([b.weights for b in self.bows]) if n else []
+            rows = np.repeat(np.arange(n), [len(b.words) for b in self.bows])
+            cols = np.concatenate([b.words for b in self.bows]) if n else np.zeros(0, np.int32)
+            vals = np.concatenate([b.weights for b in self.bows]) if n else np.zeros(0, np.float32)
             self._matrix = sp.csc_matrix((vals, (rows, cols)), shape=(n, self.vocab.n_words), dtype=np.float32)
         return self._matrix
 

@@ -43,7 +43,7 @@ def build_tree(desc: np.ndarray, k: int, levels: int, rng: np.random.Generator,
 def vocabulary_from_tree(centres: np.ndarray, children: np.ndarray, depth: np.ndarray,
                          images: Iterable[np.ndarray]) -> Vocabulary:
     """The vocabulary with its leaves numbered as words and idf counted over `images` (each (N, 32) uint8)."""
-    leaf = (children < 0).all(1)
+    leaf = np.asarray((children < 0).all(1))
     leaf[0] = False
     word_of = np.full(len(centres), -1, np.int32)
     word_of[leaf] = np.arange(leaf.sum(), dtype=np.int32)
