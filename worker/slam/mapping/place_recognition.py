@@ -52,7 +52,7 @@ class LoopDetector:
 
     def candidates(self, kf_id: int) -> list[int]:
         """Scored and grouped candidates of keyframe `kf_id` (best group first), before the consistency test."""
-        near = connected(self.map, kf_id)
+        near = [j for j in connected(self.map, kf_id) if j < kf_id]
         if not near or kf_id < self.min_gap:
             return []
         scores, common = self.db.query(self.db.bows[kf_id], upto=kf_id)
