@@ -21,7 +21,7 @@ from worker.slam.features.projection import search_by_projection
 from worker.slam.features.search import KeypointIndex
 from worker.slam.features.vocabulary import Vocabulary
 from worker.slam.geometry.pnp import pnp_ransac
-from worker.slam.geometry.pose_optimizer import optimize_pose
+from worker.slam.geometry.pose_optimizer import PoseEstimate, optimize_pose
 from worker.slam.geometry.se3 import inv, orthonormalize, pose_distance
 from worker.slam.map.keyframe import KeyFrame
 from worker.slam.map.map import Map
@@ -84,7 +84,8 @@ class LoopCloser:
         ids = np.unique(ids[ids >= 0])
         return ids[self.map.points.alive[ids]]
 
-    def _refine(self, kf: KeyFrame, T: np.ndarray, q: np.ndarray, pids: np.ndarray):
+    def _refine(self, kf: KeyFrame, T: np.ndarray, q: np.ndarray, pids: np.ndarray) -> PoseEstimate:
+        """Motion-only BA of `kf` (with depth) on keypoints `q` matched to points `pids`, from pose `T`."""
         f, X = kf.feats, self.map.points.pos[pids]
         return optimize_pose(T, X, f.uv[q], f.depth[q], self.inv_sigma2[f.octave[q]], self.K, self.bf)
 
