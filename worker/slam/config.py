@@ -184,6 +184,9 @@ class LoopConfig:
     vocabulary: str = ""
     """ORB vocabulary file (.npz of `vtdslam train-vocab`); empty: the shipped one
     (worker/slam/features/data/VOCABULARY.md)."""
+    descriptors_per_keyframe: int = valid(400, 10, 100_000)
+    """Unused since the trained vocabulary (issue 58: every descriptor of a keyframe is quantised); kept so that
+    saved configurations that set it still load."""
     min_correction_m: float = valid(0.02, 0.0, 100.0)
     """Loops whose correction is smaller than this (and < 1 degree) are accepted but not applied."""
 
