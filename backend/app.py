@@ -10,7 +10,7 @@ from fastapi import APIRouter, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from sqlalchemy.orm import Session, sessionmaker
 
-from backend.api import batches, health, job_files, jobs, presets, sequences
+from backend.api import batches, health, job_files, jobs, live, presets, sequences
 from backend.api.deps import document_auth
 from backend.api.docs import include_docs
 from backend.api.edge import EdgeMiddleware
@@ -32,7 +32,8 @@ DESCRIPTION = """Dynamic-scene RGB-D SLAM service (VTD-SLAM).
 
 Upload a TUM-layout sequence (`POST /sequences`), queue runs (`POST /jobs`, or a whole preset comparison
 with `POST /batches`), follow them live (`GET /jobs/{id}/events`, Server-Sent Events) and download the
-trajectory, dense map and metrics (`GET /jobs/{id}/artifacts/{name}`).
+trajectory, dense map and metrics (`GET /jobs/{id}/artifacts/{name}`). A camera or a recording can also stream
+into a live session (`POST /live`, then the WebSocket `/live/{job_id}/stream`): its frames run as they arrive.
 
 Errors always have the shape `{"error": {"code", "message", "detail"}}`. When the server sets
 `VTD_API_TOKEN`, mutating endpoints need `Authorization: Bearer <token>`. Every `GET` also answers `HEAD`.
@@ -95,6 +96,7 @@ def create_app(
             {"name": "sequences", "description": "RGB-D sequences in the TUM layout"},
             {"name": "jobs", "description": "pipeline runs, their progress and outputs"},
             {"name": "batches", "description": "sequences x presets comparisons"},
+            {"name": "live", "description": "live sessions: frames streamed over a WebSocket, run as they arrive"},
             {"name": "presets", "description": "pipeline and camera preset names"},
             {"name": "health", "description": "liveness"},
         ],
@@ -107,7 +109,7 @@ def create_app(
     install_error_handlers(app)
 
     api = APIRouter(prefix=API_PREFIX)
-    for module in (health, presets, sequences, jobs, job_files, batches):
+    for module in (health, presets, sequences, jobs, job_files, batches, live):
         api.include_router(module.router)
     app.include_router(api)
     include_dashboard(app)  # dashboard pages, /static, the viewer endpoint and its /viewer/ proxy

@@ -203,21 +203,23 @@ def _missed(r: dict) -> str:
 
 
 def print_summary(rows: list[dict]) -> None:
-    """Per preset over the sequences: ATE mean (min–max), frames tracked, dynamic precision/recall means, and
+    """Per preset over the sequences: ATE mean (min–max), RPE means (1 s and 1 frame apart: drift and jitter),
+    frames tracked, dynamic precision/recall means, and
     (when `--references` ran) the ATE mean as a multiple of each reference's, both over the sequences that
     have that reference."""
     refs = [label for label in REFERENCES if any(r["preset"] == label for r in rows)]
     print()
-    print("| preset | sequences | ATE mean (m) | ATE min–max (m) | tracked | dyn. precision | dyn. recall |"
-          + "".join(f" × {label} |" for label in refs))
-    print("|---|---|---|---|---|---|---|" + "---|" * len(refs))
+    print("| preset | sequences | ATE mean (m) | ATE min–max (m) | RPE 1 s mean (m) | RPE 1 frame mean (m) | tracked "
+          "| dyn. precision | dyn. recall |" + "".join(f" × {label} |" for label in refs))
+    print("|---|---|---|---|---|---|---|---|---|" + "---|" * len(refs))
     for preset in dict.fromkeys(r["preset"] for r in rows):
         rs = [r for r in rows if r["preset"] == preset]
         ate = [r["ate"] for r in rs if r["ate"] is not None]
         mean = lambda k, rs=rs: _mean([r[k] for r in rs])  # noqa: E731
         spread = f"{min(ate):.4f}–{max(ate):.4f}" if ate else "–"
-        print(f"| {preset} | {len(rs)} | {_fmt(_mean(ate), 4)} | {spread} | "
-              f"{sum(r['tracked'] for r in rs)}/{sum(r['frames'] for r in rs)} | {_fmt(mean('precision'), 2)} | "
+        print(f"| {preset} | {len(rs)} | {_fmt(_mean(ate), 4)} | {spread} | {_fmt(mean('rpe_t'), 4)} | "
+              f"{_fmt(mean('rpe_ft'), 4)} | {sum(r['tracked'] for r in rs)}/{sum(r['frames'] for r in rs)} | "
+              f"{_fmt(mean('precision'), 2)} | "
               f"{_fmt(mean('recall'), 2)} |" + "".join(f" {_fmt(_ratio(rows, preset, label), 2)} |" for label in refs))
 
 

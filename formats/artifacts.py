@@ -37,6 +37,21 @@ FIGURES = (PLOT_TRAJECTORY_TOP, PLOT_XYZ, PLOT_ATE_ERROR, PLOT_TIMINGS)
 PIPELINE_OUTPUTS = (TRAJECTORY, KEYFRAMES, MAP, METRICS, CONFIG)
 """What every pipeline run writes (``vtdslam run`` and a job alike)."""
 
+PARTIAL_STATE = "partial.json"
+"""While a job runs: its latest frames (index, timestamp, arrival, position, tracked) and counts (worker.snapshots)."""
+PARTIAL_TRAJECTORY = "partial_trajectory.txt"
+"""While a job runs: the tracked frames' poses so far, as tracked (TUM)."""
+PARTIAL_KEYFRAMES = "partial_keyframes.txt"
+"""While a job runs: the keyframes so far (TUM)."""
+PARTIAL_MAP = "partial_map.ply"
+"""While a job runs: the map so far (the keyframes' points at their current poses, formats.ply)."""
+PARTIAL_FRAME_RGB = "partial_frame_rgb.jpg"
+"""While a job runs: the latest snapshot's colour image."""
+PARTIAL_FRAME_MASK = "partial_frame_mask.jpg"
+"""While a job runs: the latest snapshot's frame with its masks (red: moving, yellow: potentially dynamic)."""
+PARTIALS = (PARTIAL_STATE, PARTIAL_TRAJECTORY, PARTIAL_KEYFRAMES, PARTIAL_MAP, PARTIAL_FRAME_RGB, PARTIAL_FRAME_MASK)
+"""The snapshot files of a running job; removed when it ends (its final artifacts replace them)."""
+
 _FRAME_IMAGE = re.compile(r"^frame_(\d{6,})_([a-z]+)\.(jpg|png)$")
 
 

@@ -22,12 +22,15 @@ from storage.settings import Settings
 from worker.identity import claim_name
 from worker.reaping import reap_orphans, start_reaper
 from worker.runner import PipelineFn, run_slam
+from worker.snapshots import SnapshotConfig
 from worker.tasks import WorkerContext, register_tasks
 
 log = logging.getLogger("worker.consumer")
 
 
-def build_context(settings: Settings, *, name: str | None = None, pipeline: PipelineFn = run_slam) -> WorkerContext:
+def build_context(settings: Settings, *, name: str | None = None, pipeline: PipelineFn = run_slam,
+                  snapshots: SnapshotConfig | None = None) -> WorkerContext:
+    """``snapshots``: write running jobs' partial results (``worker.snapshots``; live sessions always do)."""
     engine = make_engine(settings)
     init_db(engine)
     return WorkerContext(
@@ -36,6 +39,7 @@ def build_context(settings: Settings, *, name: str | None = None, pipeline: Pipe
         store=ArtifactStore(settings.data_dir),
         name=name or socket.gethostname(),
         pipeline=pipeline,
+        snapshots=snapshots,
     )
 
 
@@ -69,7 +73,9 @@ def run_consumer(
 ) -> None:
     """Run the consumer in this process until a signal stops it."""
     identity = claim_name(settings.data_dir, name)  # held until the process exits
-    ctx = build_context(settings, name=identity.name, pipeline=pipeline)
+    # the real pipeline takes the snapshot hook; a test double given here may not
+    ctx = build_context(settings, name=identity.name, pipeline=pipeline,
+                        snapshots=SnapshotConfig() if pipeline is run_slam else None)
     huey = make_worker_huey(settings, ctx)  # before reaping: requeued orphans go back on this queue
     reap_orphans(ctx)
     identity.touch()

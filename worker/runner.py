@@ -56,13 +56,15 @@ def run_slam(
     *,
     progress: ProgressFn,
     should_cancel: CancelFn,
+    snapshot: Callable[..., None] | None = None,
 ) -> RunOutput:
     """Run ``worker.slam`` on a sequence folder, writing trajectory.txt, keyframes.txt, map.ply,
     metrics.json and config.json into ``out_dir``.
 
     ``camera`` is what ``Sequence.camera`` stores: ``{"preset": name}`` or explicit intrinsics (a
     ``camera.json`` in the folder wins, as everywhere). Raises :class:`Cancelled` when ``should_cancel``
-    stopped it and ``worker.slam.errors.SlamError`` on bad input or configuration.
+    stopped it and ``worker.slam.errors.SlamError`` on bad input or configuration. ``snapshot``: the run's
+    ``on_step`` hook (``worker.snapshots.PartialWriter``: partial results while it runs).
     """
     from worker.slam.camera import Camera, camera_from_preset
     from worker.slam.io.sequence import Sequence
@@ -73,7 +75,8 @@ def run_slam(
     config = get_preset(preset, overrides or None)
     sequence = Sequence(sequence_dir, cam)
     try:
-        result = run_pipeline(sequence, config, out_dir, progress=progress, should_cancel=should_cancel)
+        result = run_pipeline(sequence, config, out_dir, progress=progress, should_cancel=should_cancel,
+                              on_step=snapshot)
     except PipelineCancelled as exc:
         raise Cancelled(exc.message) from exc
     frame_stats = [FrameStats.from_row(r) for r in result.frame_stats]

@@ -28,7 +28,8 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from formats import artifacts
 from formats.frame_stats import STORED_COLUMNS, format_frame_stats
-from formats.run_metrics import RunMetrics
+from formats.run_metrics import RunMetrics, write_run_metrics
+from storage import live as live_spool
 from storage.artifacts import ArtifactStore
 from storage.errors import Conflict, NotFound, StorageError
 from storage.models import JobStatus
@@ -36,8 +37,10 @@ from storage.queue import register_run_job
 from storage.redact import redact_paths
 from storage.repositories import jobs, metrics, sequences
 from storage.settings import Settings
+from worker.live import run_live_slam
 from worker.preview import write_trajectory_preview
 from worker.runner import Cancelled, PipelineFn, RunOutput, run_slam
+from worker.snapshots import PartialWriter, SnapshotConfig
 
 log = logging.getLogger("worker.tasks")
 
@@ -55,6 +58,11 @@ class WorkerContext:
     name: str = field(default_factory=socket.gethostname)
     """Stored on the jobs it claims; a restarted worker of the same name fails its orphans."""
     pipeline: PipelineFn = run_slam
+    live_pipeline: Callable[..., RunOutput] = run_live_slam
+    """Runs a job whose sequence is a live session still receiving (``storage.live``); takes ``snapshot``."""
+    snapshots: SnapshotConfig | None = None
+    """Partial results of running jobs for the page and the viewer (``worker.snapshots``); None: only live
+    sessions write them (``pipeline`` is then called without ``snapshot``: test doubles need not take it)."""
     progress_interval_s: float = 0.5
     """Progress is written (and cancellation checked) at most this often."""
     stopping: threading.Event = field(default_factory=threading.Event)
@@ -180,14 +188,20 @@ def _run_claimed(
     status, error = JobStatus.FAILED, None
     timings: dict[str, Any] | None = None
     saving = False
+    partial: PartialWriter | None = None
+    live = own_session = False
     try:
         job = jobs.get(session, job_id)
         seq = sequences.get(session, job.sequence_id)
         log.info("job %s: %s on sequence %s (%s, %d frames), worker %s",
                  job_id, job.preset, seq.name, seq.id, seq.frames, ctx.name)
         reporter.progress(0, seq.frames, "starting")
+        live = (seq.meta or {}).get("live") == live_spool.LIVE_RECEIVING
+        own_session = live and (seq.meta or {}).get(live_spool.LIVE_JOB) == job_id
+        if live or ctx.snapshots is not None:
+            partial = PartialWriter(ctx.store, job_id, ctx.snapshots or SnapshotConfig())
         t0 = time.monotonic()
-        output = ctx.pipeline(
+        output = (ctx.live_pipeline if live else ctx.pipeline)(
             ctx.store.resolve(seq.path),
             dict(seq.camera),
             job.preset,
@@ -195,8 +209,12 @@ def _run_claimed(
             out_dir,
             progress=reporter.progress,
             should_cancel=reporter.should_cancel,
+            **({"snapshot": partial} if partial is not None else {}),
         )
         run_s = time.monotonic() - t0
+        if partial is not None:
+            partial.close()  # the last snapshot written: its outcome counts
+            _snapshot_figures(output, out_dir, partial)
         reporter.progress(reporter.total, reporter.total, "saving")
         _preview(out_dir)
         if reporter.stop_reason in ("deleted", "ended"):  # not ours any more: store nothing
@@ -233,7 +251,33 @@ def _run_claimed(
             _discard_results(ctx, session, job_id, attempt)
     finally:
         shutil.rmtree(out_dir, ignore_errors=True)
+        if partial is not None:
+            partial.remove()
+        if own_session:  # the session's own job ended (however): so does its stream
+            _end_session(ctx, session, job_id)
     return _finish(ctx, session, job_id, attempt, status, error, timings, joblog)
+
+
+def _snapshot_figures(output: RunOutput, out_dir: Path, partial: PartialWriter) -> None:
+    """What the partial results cost the pipeline thread (timings_ms["snapshots"], ms per frame) and, when they
+    stopped being written, why (a warning: the fallback is on record), in the stored metrics and metrics.json."""
+    if partial.frames:
+        output.metrics.setdefault("timings_ms", {})["snapshots"] = round(1000 * partial.spent_s / partial.frames, 2)
+    if partial.error is not None:
+        output.metrics["warnings"] = [*output.metrics.get("warnings", []), partial.error]
+    if (out_dir / artifacts.METRICS).is_file():
+        write_run_metrics(out_dir / artifacts.METRICS, RunMetrics.from_dict(output.metrics))
+
+
+def _end_session(ctx: WorkerContext, session: Session, job_id: str) -> None:
+    """A live job ended (however): its stream ends too, and its sequence is recorded as an ordinary one."""
+    try:
+        seq = sequences.get(session, jobs.get(session, job_id).sequence_id)
+        spool = live_spool.LiveSpool(ctx.store.resolve(seq.path))
+        spool.end("the job ended", spool.count())
+        live_spool.finalize(session, ctx.store, seq.id)
+    except Exception as exc:  # the job's verdict stands; the sequence keeps its files
+        log.warning("job %s: could not record its live session's sequence: %s", job_id, exc)
 
 
 def _discard_results(ctx: WorkerContext, session: Session, job_id: str, attempt: int) -> None:

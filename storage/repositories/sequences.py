@@ -134,3 +134,22 @@ def delete(session: Session, sequence_id: str) -> list[str]:
         job_ids = list(session.scalars(select(Job.id).where(Job.sequence_id == sequence_id)))
         session.execute(sql_delete(Sequence).where(Sequence.id == sequence_id))
     return job_ids
+
+
+def set_recorded(session: Session, sequence_id: str, *, frames: int, duration_s: float, size_bytes: int,
+                 has_groundtruth: bool, meta: dict[str, Any]) -> Sequence:
+    """What a live session's sequence holds once its stream ended (its row was created empty)."""
+    with writing(session):
+        seq = get(session, sequence_id)
+        seq.frames, seq.duration_s, seq.size_bytes = frames, duration_s, size_bytes
+        seq.has_groundtruth = has_groundtruth
+        seq.meta = {**(seq.meta or {}), **meta}
+    return seq
+
+
+def update_meta(session: Session, sequence_id: str, meta: dict[str, Any]) -> Sequence:
+    """Merge ``meta`` into the sequence's ``meta`` (a live session names its job there)."""
+    with writing(session):
+        seq = get(session, sequence_id)
+        seq.meta = {**(seq.meta or {}), **meta}
+    return seq

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 from storage.artifacts import ArtifactStore
 from storage.errors import StorageError, Unreadable
+from webui.viewer.live_scene import PARTIAL, LiveScene, partial_state
 from webui.viewer.run_data import load_run
 from webui.viewer.scene import build_scene
 
@@ -56,6 +57,8 @@ class HubConfig:
     """When set: the secret ``/runs`` requires, and the run servers bind loopback."""
     client_timeout_s: float = 10.0
     """A control client silent this long is dropped (a slow client never holds a thread)."""
+    refresh_s: float = 1.0
+    """A running job's scene is redrawn from its partial results this often (``live_scene``)."""
 
     @property
     def run_host(self) -> str:
@@ -76,7 +79,10 @@ class ViewerHub:
         self.store = store
         self.config = config
         self._servers: OrderedDict[str, viser.ViserServer] = OrderedDict()
+        self._live: dict[str, LiveScene] = {}
         self._lock = threading.Lock()
+        self._refresher: threading.Thread | None = None
+        self._stopped = threading.Event()
 
     def open_run(self, job_id: str) -> RunServer:
         """The run's viser server, started on first use."""
@@ -86,8 +92,10 @@ class ViewerHub:
             if job_id in self._servers:
                 self._servers.move_to_end(job_id)
                 return self._address(self._servers[job_id])
+            run_dir = self.store.job_dir(job_id)
             try:
-                data = load_run(self.store.job_dir(job_id))  # NotFound if the run has no trajectory
+                running = partial_state(run_dir) == PARTIAL  # a running job's snapshots: a scene that grows
+                data = None if running else load_run(run_dir)  # NotFound if the run has no trajectory
             except OSError as exc:  # files of another user on shared storage, an I/O error
                 raise Unreadable(
                     f"the 3D viewer cannot read run {job_id}'s files ({exc.strerror or exc}); "
@@ -96,10 +104,34 @@ class ViewerHub:
             self._evict()
             server = viser.ViserServer(host=self.config.run_host, port=0, label=f"VTD-SLAM run {job_id[:8]}",
                                        verbose=False)
-            build_scene(server, data, f"Run {job_id[:8]}")
+            if data is not None:
+                build_scene(server, data, f"Run {job_id[:8]}")
+            else:
+                live = LiveScene(server, run_dir, f"Run {job_id[:8]}")
+                if live.refresh():
+                    self._live[job_id] = live
+                    self._start_refresher()
             self._servers[job_id] = server
             log.info("viewer for run %s on %s:%d", job_id, self.config.run_host, server.get_port())
             return self._address(server)
+
+    def _start_refresher(self) -> None:
+        if self._refresher is None:
+            self._refresher = threading.Thread(target=self._refresh_loop, name="viewer-refresh", daemon=True)
+            self._refresher.start()
+
+    def _refresh_loop(self) -> None:
+        """Redraw the running jobs' scenes; a scene whose run is final is left as the finished run's."""
+        while not self._stopped.wait(self.config.refresh_s):
+            with self._lock:
+                for job_id, live in list(self._live.items()):
+                    try:
+                        going = live.refresh()
+                    except Exception:  # one broken run never stops the others' updates
+                        log.exception("run %s: the live scene could not be redrawn", job_id)
+                        going = False
+                    if not going:
+                        del self._live[job_id]
 
     def _address(self, server: viser.ViserServer) -> RunServer:
         return RunServer(reachable_host(self.config.run_host), server.get_port())
@@ -109,13 +141,16 @@ class ViewerHub:
             idle = [k for k, s in self._servers.items() if not s.get_clients()]
             victim = idle[0] if idle else next(iter(self._servers))
             self._servers.pop(victim).stop()
+            self._live.pop(victim, None)
 
     def runs(self) -> list[str]:
         with self._lock:
             return list(self._servers)
 
     def stop(self) -> None:
+        self._stopped.set()
         with self._lock:
+            self._live.clear()
             for server in self._servers.values():
                 server.stop()
             self._servers.clear()

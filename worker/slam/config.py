@@ -165,6 +165,17 @@ class MappingConfig:
     """At the end, re-solve every tracked non-keyframe frame's pose by motion-only BA against the final map
     points it matched (`mapping/frame_refit.py`), not the points as they were when it was tracked. Keeps ~6 kB
     per frame until the end. Measured: docs/results/settings.md#mapping-refit_frames"""
+    smooth_frames: bool = True
+    """After the refit, solve all frames' poses together under a constant-velocity motion prior, each frame
+    weighted by its refit's pose information (`mapping/smoothing.py`): removes the per-frame jitter of poses
+    solved alone (needs `refit_frames`). Measured: docs/results/settings.md#mapping-smooth_frames"""
+    smooth_accel_sigma: float = valid(0.15, 0.001, 1000.0)
+    """Motion prior of the smoother: white-noise acceleration, m/s^2 per sqrt(Hz) (larger: follows each
+    frame's own solve more closely; Huber-weighted, so real jolts pass). 0.05-0.25 scored alike on the synthetic
+    room, augmented seeds and 7-Scenes; 1.0 kept much of the jitter.
+    Measured: docs/results/settings.md#mapping-smooth_accel_sigma"""
+    smooth_angular_sigma: float = valid(0.5, 0.001, 1000.0)
+    """The same for rotation, rad/s^2 per sqrt(Hz). Measured: docs/results/settings.md#mapping-smooth_angular_sigma"""
 
 
 @dataclass

@@ -15,7 +15,7 @@ from worker.slam.io.sequence import Sequence
 from worker.slam.run.callbacks import CancelFn, PipelineCancelled, ProgressFn
 from worker.slam.run.driver import drive
 from worker.slam.run.outputs import write_outputs
-from worker.slam.run.pipeline_run import PipelineRun
+from worker.slam.run.pipeline_run import PipelineRun, StepFn
 from worker.slam.run.result import RunResult
 from worker.slam.stages import FrameStage
 from worker.slam.truth import load_truth
@@ -26,7 +26,8 @@ __all__ = ["CancelFn", "PipelineCancelled", "ProgressFn", "RunResult", "run_pipe
 def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str | None = None, *,
                  start: int = 0, max_frames: int | None = None, progress: ProgressFn | None = None,
                  should_cancel: CancelFn | None = None, stages: list[FrameStage] | None = None,
-                 read_ahead: int = 2, prepare_ahead: bool = True, restore_behind: bool = True) -> RunResult:
+                 read_ahead: int = 2, prepare_ahead: bool = True, restore_behind: bool = True,
+                 on_step: StepFn | None = None) -> RunResult:
     """Track frames [start, start+max_frames) of `sequence`; write the outputs to `out_dir` when given.
 
     `stages`: the per-frame stages to run (default: those `config.stages` names). `read_ahead`,
@@ -40,7 +41,7 @@ def run_pipeline(sequence: Sequence, config: PipelineConfig, out_dir: Path | str
     camera = sequence.camera
     stages = shipped_catalog().build_stages(config, camera) if stages is None else stages
     with PipelineRun(camera, config, stages, sequence=sequence, truth=load_truth(sequence.root), start=start,
-                     total=total, progress=progress, restore_behind=restore_behind) as run:
+                     total=total, progress=progress, restore_behind=restore_behind, on_step=on_step) as run:
         drive(run, sequence, first, range(start + 1, stop), read_ahead=read_ahead, prepare_ahead=prepare_ahead,
               should_cancel=should_cancel)
         result = run.finish()

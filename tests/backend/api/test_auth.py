@@ -179,11 +179,12 @@ def test_the_right_token_works_on_every_mutating_route(secured, seq_tgz) -> None
             headers=GOOD), 201),
         ("DELETE", "/api/v1/sequences/{sequence_id}"): lambda: ok(client.delete(
             f"/api/v1/sequences/{ids['seq']}", headers=GOOD), 204),
+        ("POST", "/api/v1/live"): lambda: ok(client.post("/api/v1/live", json={"camera": "tum1"}, headers=GOOD), 201),
     }
     assert set(steps) == mutating_routes(client.app)
     for step in steps.values():
         step()
-    assert client.get("/api/v1/sequences").json()["total"] == 1  # the imported one is left
+    assert client.get("/api/v1/sequences").json()["total"] == 2  # the imported one and the live session's are left
     # the scheme is case-insensitive (RFC 7235)
     assert client.delete(f"/api/v1/sequences/{ids['imp']}", headers={"Authorization": f"bearer {TOKEN}"}
                          ).status_code == 204

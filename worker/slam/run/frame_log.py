@@ -58,8 +58,8 @@ class FrameLog:
         self.most_with_depth = max(self.most_with_depth, int(np.count_nonzero(res.feats.depth > 0)))
         self.rel.append(_relative(slam_map, res))
         if self.matches is not None:
-            self.matches.add(res.point_ids, res.feats.uv, res.feats.depth, res.feats.octave,
-                             res.ok and res.keyframe is None)
+            self.matches.add(res.point_ids, res.feats.uv, res.feats.depth, res.feats.octave, bool(res.ok),
+                             keyframe=res.keyframe is not None)
         return row
 
     def poses(self, slam_map: Map) -> np.ndarray:

@@ -3,7 +3,8 @@ frame refit, the dense map, metrics and evaluation.
 
 The per-frame state kept is the pose relative to its reference keyframe, so BA and loop corrections move every
 frame's pose at the end, and (`mapping.refit_frames`) the map points it matched, so each frame's pose is then
-re-solved against the final map (`mapping/frame_refit.py`). Before each frame the stages get a fresh
+re-solved against the final map (`mapping/frame_refit.py`) and (`mapping.smooth_frames`) all frames smoothed
+together under a motion prior (`mapping/smoothing.py`). Before each frame the stages get a fresh
 `StageContext` (the motion model's predicted pose, the last tracked pose and its covariance, the run's history of
 past frames), never the tracker. The run owns that history (`worker.slam.history`): it records each frame after
 its stages ran and gives it its pose once tracked. With the sequence's truth, an observer scores the stages'
@@ -12,6 +13,7 @@ outputs against it (`truth_observer`); its scores are the "truth" entries of the
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from types import TracebackType
 
@@ -28,6 +30,7 @@ from worker.slam.io.trajectory import Trajectory
 from worker.slam.mapping.carve import FrameViews
 from worker.slam.mapping.dense_map import build_dense_map
 from worker.slam.mapping.frame_refit import refit_poses
+from worker.slam.mapping.smoothing import SmootherSettings, smooth_poses
 from worker.slam.run.callbacks import ProgressFn
 from worker.slam.run.deferred import DeferredWork
 from worker.slam.run.evaluation import RunEvaluation, evaluate_run
@@ -43,6 +46,10 @@ from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPos
 from worker.slam.tracking.result import TrackResult
 from worker.slam.truth import Truth
 
+StepFn = Callable[["PipelineRun", Frame, FrameInputs, TrackResult], None]
+"""Called after each frame's step with the run, the frame, what its stages made of it and its tracking result
+(the service writes partial snapshots through it while a job runs); it must not change the run."""
+
 
 class PipelineRun:
     """Contract: `step(frame)` once per frame, in frame order, on one thread (the pipeline thread); then
@@ -56,10 +63,13 @@ class PipelineRun:
 
     def __init__(self, camera: Camera, config: PipelineConfig, stages: list[FrameStage], *,
                  sequence: Sequence | None = None, truth: Truth | None = None, start: int = 0, total: int = 0,
-                 progress: ProgressFn | None = None, restore_behind: bool = True) -> None:
+                 progress: ProgressFn | None = None, restore_behind: bool = True,
+                 on_step: StepFn | None = None) -> None:
         """`restore_behind`: run deferred stage work (restoration of keyframes and previews) on a background
-        thread while the next frames are tracked (False: on this thread, right after the frame's tracking)."""
+        thread while the next frames are tracked (False: on this thread, right after the frame's tracking).
+        `on_step`: see `StepFn`."""
         self.camera, self.config, self.sequence = camera, config, sequence
+        self.on_step = on_step
         self.start, self.total, self.progress = start, total, progress
         self.parts: SlamParts = build_slam(camera, config)
         self.timer = StageTimer()
@@ -109,6 +119,8 @@ class PipelineRun:
         self.deferred.release(item.frame.index)  # its later frames have gone through the stages
         if self.progress is not None:
             self.progress(k + 1, self.total, "tracking")
+        if self.on_step is not None:
+            self.on_step(self, item.frame, inputs, res)
         return res
 
     def _frame_context(self) -> StageContext:
@@ -205,15 +217,20 @@ class PipelineRun:
                 f"a map (tracking.init_min_points {self.config.tracking.init_min_points})")
 
     def _trajectory(self) -> tuple[Trajectory, int]:
-        """Every frame's final T_WC, lost ones too (through its reference keyframe, re-solved against the final map when
-        `mapping.refit_frames`), and how many frames were re-solved. Starts the timer's lap of "dense"."""
-        smap = self.parts.map
+        """Every frame's final T_WC, lost ones too (through its reference keyframe, re-solved against the final map
+        when `mapping.refit_frames`, then smoothed when `mapping.smooth_frames`), and how many frames were
+        re-solved. Starts the timer's lap of "dense"."""
+        smap, mc = self.parts.map, self.config.mapping
         self.timer.mark()
         poses = self.log.poses(smap)
         n_refit = 0
         if self.log.matches is not None and len(smap):
-            n_refit = refit_poses(poses, self.log.matches, smap.points, self.parts.sensor, self.config.tracking)
+            n_refit, info = refit_poses(poses, self.log.matches, smap.points, self.parts.sensor, self.config.tracking)
             self.timer.lap("frame_refit")  # "dense" times the dense map alone
+            if mc.smooth_frames:
+                settings = SmootherSettings(mc.smooth_accel_sigma, mc.smooth_angular_sigma)
+                poses = smooth_poses(poses, np.asarray(self.log.stamps, dtype=np.float64), info, settings)
+                self.timer.lap("frame_smoothing")
         return Trajectory(np.array(self.log.stamps, dtype=np.float64), orthonormalize(poses)), n_refit
 
     def _dense_map(self, traj: Trajectory, tracked: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:

@@ -43,8 +43,8 @@ def test_a_frame_follows_the_points_that_bundle_adjustment_moved():
     stored = T_true.copy()
     stored[:3, 3] += [0.02, -0.01, 0.015]
     poses = stored[None].copy()
-    n = refit_poses(poses, log, pts, SENSOR, TC)
-    assert n == 1
+    n, info = refit_poses(poses, log, pts, SENSOR, TC)
+    assert n == 1 and info[0].shape == (6, 6) and np.all(np.linalg.eigvalsh(info[0]) > 0)
     dt_before, _ = pose_distance(stored, T_true)
     dt_after, dr_after = pose_distance(poses[0], T_true)
     assert dt_before > 0.02 and dt_after < 0.002 and dr_after < 0.002  # radians
@@ -54,14 +54,14 @@ def test_frames_without_enough_surviving_points_and_unlogged_frames_keep_their_p
     pts, ids, T_true = _scene()
     log = FrameMatchLog()
     _observe(pts, ids[:40], T_true, log)          # frame 0: 40 matches, 20 of whose points are culled later
-    log.add(np.full(5, -1), np.zeros((5, 2)), np.zeros(5), np.zeros(5, int), keep=False)  # frame 1: a keyframe
+    log.add(np.full(5, -1), np.zeros((5, 2)), np.zeros(5), np.zeros(5, int), keep=False)  # frame 1: lost
     _observe(pts, ids, T_true, log)               # frame 2: all points
     pts.kill(ids[:20])
     shifted = T_true.copy()
     shifted[:3, 3] += 0.01
     poses = np.stack([shifted, shifted, shifted])
-    n = refit_poses(poses, log, pts, SENSOR, TC)
-    assert n == 1
+    n, info = refit_poses(poses, log, pts, SENSOR, TC)
+    assert n == 1 and info[0] is None and info[1] is None and info[2] is not None
     assert np.array_equal(poses[0], shifted) and np.array_equal(poses[1], shifted)
     assert pose_distance(poses[2], T_true)[0] < 1e-4
     assert log.frames[1] is None and len(log.frames[0].ids) == 40 and log.frames[0].uv.dtype == np.float32
@@ -76,3 +76,16 @@ def test_outlier_matches_do_not_drag_the_refit():
     poses[0][:3, 3] += 0.01
     refit_poses(poses, log, pts, SENSOR, TC)
     assert pose_distance(poses[0], T_true)[0] < 0.002
+
+
+def test_a_keyframe_keeps_its_pose_but_gets_the_information_of_its_solve():
+    pts, ids, T_true = _scene(seed=4)
+    log = FrameMatchLog()
+    Pc = transform(inv(T_true), pts.pos[ids])
+    uv = (Pc[:, :2] / Pc[:, 2:]) * [K[0, 0], K[1, 1]] + K[:2, 2]
+    log.add(np.asarray(ids, np.int64), uv, Pc[:, 2], np.zeros(len(ids), int), keep=True, keyframe=True)
+    shifted = T_true.copy()
+    shifted[:3, 3] += 0.01
+    poses = shifted[None].copy()
+    n, info = refit_poses(poses, log, pts, SENSOR, TC)
+    assert n == 0 and np.array_equal(poses[0], shifted) and info[0] is not None

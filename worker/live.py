@@ -1,0 +1,203 @@
+"""The live runner: a session's frames through the pipeline as they arrive (``storage.live`` is the spool the
+api fills), then the same finish and outputs as an offline run.
+
+It has the signature of ``worker.runner.PipelineFn`` (plus the snapshot writer), so ``worker.tasks`` runs a
+live session as any job: claim, heartbeat, progress, results. The run never waits on more than
+``LiveConfig.max_behind`` unprocessed frames: when the pipeline falls behind, the oldest unprocessed frames are
+skipped (dropped: counted in the metrics as ``live_frames_dropped``; their files stay in the sequence). After the
+stream ended, a ground truth the client sent (``groundtruth.txt`` in the folder) scores the trajectory as in an
+offline run.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from storage.live import LiveSpool, SpooledFrame, StreamEnd
+from worker.runner import CancelFn, Cancelled, ProgressFn, RunOutput
+from worker.snapshots import PartialWriter
+
+log = logging.getLogger("worker.live")
+
+
+@dataclass(frozen=True)
+class LiveConfig:
+    """How a live session is followed."""
+
+    max_behind: int = 3
+    """Unprocessed frames the run may fall behind by; older ones are dropped (30 Hz: 0.1 s)."""
+    poll_s: float = 0.005
+    """How often the spool is checked while no frame is waiting."""
+    idle_timeout_s: float = 120.0
+    """A stream that sent nothing (and did not end) for this long is ended by the worker (an api that died)."""
+
+
+READY_STAGE = "waiting for frames"
+"""The job's stage once the live runner is ready (a client streaming a recording may wait for it)."""
+
+
+class StreamEnded(Exception):
+    """The spool ended (or went silent) before the next frame."""
+
+
+def run_live_slam(sequence_dir: Path, camera: dict[str, Any], preset: str, overrides: dict[str, Any], out_dir: Path,
+                  *, progress: ProgressFn, should_cancel: CancelFn, snapshot: PartialWriter | None = None,
+                  live: LiveConfig | None = None) -> RunOutput:
+    """Follow the session in ``sequence_dir`` until its stream ends, then finish the run and write its files to
+    ``out_dir`` (as ``worker.runner.run_slam``). Raises ``Cancelled`` when ``should_cancel`` says so and
+    ``worker.slam.errors.SlamError`` (with the reason) when no frame came or none could be tracked."""
+    from formats.frame_stats import FrameStats
+    from worker.slam.camera import Camera, camera_from_preset
+    from worker.slam.catalog import shipped_catalog
+    from worker.slam.errors import SequenceFormatError
+    from worker.slam.io.sequence import Sequence
+    from worker.slam.presets import get_preset
+    from worker.slam.run.outputs import write_outputs
+    from worker.slam.run.pipeline_run import PipelineRun
+
+    live = live or LiveConfig()
+    cam = camera_from_preset(camera["preset"]) if "preset" in camera else Camera.from_dict(camera)
+    # a stream has no frames after the latest: restoration takes its references from the past (its "causal"
+    # mode, meant for streaming input) unless the session's config says otherwise
+    config = get_preset(preset, {"restoration.references": "causal", **(overrides or {})})
+    # the stages (the segmentation network) are built before the first frame is waited for: loading them
+    # takes seconds, during which a stream would fall behind; rebuilt only if the frames are of another size
+    stages = shipped_catalog().build_stages(config, cam)
+    follower = _Follower(LiveSpool(sequence_dir), live, should_cancel)
+    follower.skip_waiting()  # frames that came while the worker started are stale: counted as dropped
+    progress(0, 0, READY_STAGE)
+    try:
+        first = follower.next()
+    except StreamEnded as exc:
+        raise SequenceFormatError(f"the live session received no frame ({exc})") from None
+    reader = _FrameReader(sequence_dir, cam)
+    frame = reader.read(first)
+    if reader.camera is not cam:
+        stages = shipped_catalog().build_stages(config, reader.camera)
+    with PipelineRun(reader.camera, config, stages, on_step=snapshot) as run:
+        _follow(run, follower, reader, (first, frame), snapshot, progress)
+        progress(follower.processed, follower.received, "finishing")
+        run.sequence = Sequence(sequence_dir, reader.camera)  # complete now: its ground truth scores the run
+        result = run.finish()
+    result.metrics.update({f"live_{k}": v for k, v in follower.counts().items()})
+    result.metrics["live_end"] = follower.end.reason if follower.end else "unknown"
+    write_outputs(result, config, Path(out_dir))
+    log.info("live session: %s", follower.counts())
+    return RunOutput(metrics=result.metrics, config=config.to_dict(),
+                     frame_stats=[FrameStats.from_row(r) for r in result.frame_stats])
+
+
+def _follow(run: Any, follower: _Follower, reader: _FrameReader, first: tuple[SpooledFrame, Any],
+            snapshot: PartialWriter | None, progress: ProgressFn) -> None:
+    """Step `run` through the session until the stream ends. While a frame runs, the next one waiting (if any)
+    is decoded on a reader thread and its stages' `prepare` work (the segmentation network) starts on another, as
+    the offline driver overlaps them (`worker.slam.run.driver`); each works in frame order."""
+    from worker.slam.io.prepare_ahead import PrepareAhead
+
+    with PrepareAhead(run.stages.preparers()) as prep, \
+            ThreadPoolExecutor(1, thread_name_prefix="vtdslam-live-read") as pool:
+        def load(ref: SpooledFrame) -> tuple[SpooledFrame, Any]:
+            return ref, prep.submit(reader.read(ref))
+
+        ahead: Future[tuple[SpooledFrame, Any]] | None = None
+        ref, item = first[0], prep.submit(first[1])
+        while True:
+            nxt = follower.take()  # already waiting: read it while this frame runs
+            if nxt is not None:
+                ahead = pool.submit(load, nxt)
+            if snapshot is not None:
+                snapshot.arrival(ref.index, ref.arrival)
+                snapshot.counts.update(follower.counts())
+            run.step(item)
+            progress(follower.processed, follower.received, "live")
+            if ahead is None:
+                try:
+                    ahead = pool.submit(load, follower.next())
+                except StreamEnded:
+                    return
+            ref, item = ahead.result()
+            ahead = None
+
+
+class _Follower:
+    """The next frame to run: the oldest unprocessed one, unless more than ``max_behind`` wait (then the
+    newest ``max_behind``: the older ones are dropped)."""
+
+    def __init__(self, spool: LiveSpool, live: LiveConfig, should_cancel: CancelFn) -> None:
+        self.spool, self.live, self.should_cancel = spool, live, should_cancel
+        self.next_index = self.processed = self.dropped = 0
+        self.end: StreamEnd | None = None
+
+    @property
+    def received(self) -> int:
+        return self.spool.count()
+
+    def counts(self) -> dict[str, int]:
+        return {"frames_received": self.received, "frames_processed": self.processed,
+                "frames_dropped": self.dropped, "max_behind": self.live.max_behind}
+
+    def skip_waiting(self) -> None:
+        """Drop all but the newest ``max_behind`` frames received so far."""
+        n = self.spool.count()
+        if n - self.next_index > self.live.max_behind:
+            self.dropped += n - self.live.max_behind - self.next_index
+            self.next_index = n - self.live.max_behind
+
+    def take(self) -> SpooledFrame | None:
+        """The next frame if one is waiting (never blocks)."""
+        if self.spool.count() <= self.next_index:
+            return None
+        return self._pick()
+
+    def _pick(self) -> SpooledFrame:
+        self.skip_waiting()
+        frame = self.spool.frame(self.next_index)
+        self.next_index += 1
+        self.processed += 1
+        return frame
+
+    def next(self) -> SpooledFrame:
+        quiet_since = time.monotonic()
+        while True:
+            if self.should_cancel():
+                raise Cancelled(f"cancelled after {self.processed} frames of the live session")
+            n = self.spool.count()
+            if n > self.next_index:
+                return self._pick()
+            self.end = self.spool.ended()
+            if self.end is not None and self.spool.count() <= self.next_index:
+                raise StreamEnded(self.end.reason)
+            if time.monotonic() - quiet_since > self.live.idle_timeout_s:
+                self.end = self.spool.end(f"no frame for {self.live.idle_timeout_s:g} s", n)
+                log.warning("live session: %s; finishing with the frames received", self.end.reason)
+                raise StreamEnded(self.end.reason)
+            time.sleep(self.live.poll_s)
+
+
+class _FrameReader:
+    """Decodes spooled frames; the camera is rescaled to the first frame's size (as ``Sequence`` does)."""
+
+    def __init__(self, folder: Path, camera: Any) -> None:
+        self.folder, self.camera = folder, camera
+        self.size: tuple[int, int] | None = None
+
+    def read(self, ref: SpooledFrame) -> Any:
+        from worker.slam.errors import SequenceFormatError
+        from worker.slam.io.images import read_depth, read_rgb
+        from worker.slam.io.sequence import Frame
+
+        rgb = read_rgb(self.folder / ref.rgb)
+        depth = read_depth(self.folder / ref.depth, self.camera.depth_scale)
+        h, w = depth.shape
+        if self.size is None:
+            self.size = (w, h)
+            if (w, h) != (self.camera.width, self.camera.height):
+                self.camera = self.camera.scaled(w, h)
+        if rgb.shape[:2] != depth.shape or (w, h) != self.size:
+            raise SequenceFormatError(f"frame {ref.index}: size differs from the session's first frame",
+                                      path=self.folder / ref.rgb)
+        return Frame(ref.index, ref.timestamp, rgb, depth)
