@@ -18,6 +18,7 @@ from cli import (
     stream_cmd,
     synth_cmd,
     viewer_cmd,
+    vocab_cmd,
     worker_cmd,
 )
 
@@ -47,7 +48,7 @@ def _options(
 
 
 for module in (augment_cmd, demo_cmd, eval_cmd, fetch_cmd, import_bag_cmd, inspect_cmd, msnet_cmd, run_cmd, serve_cmd,
-               stream_cmd, synth_cmd, viewer_cmd, worker_cmd):
+               stream_cmd, synth_cmd, viewer_cmd, vocab_cmd, worker_cmd):
     module.register(app)
 
 

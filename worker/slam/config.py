@@ -184,14 +184,22 @@ class LoopConfig:
     """Detect revisits and correct them with a pose graph."""
     min_keyframe_gap: int = valid(10, 1, 100_000)
     """Candidates must be at least this many keyframes older than the query."""
-    min_matches: int = valid(60, 4, 100_000)
-    """Descriptor matches (ratio test) that make a candidate."""
+    min_matches: int = valid(20, 4, 100_000)
+    """Descriptor matches (under one vocabulary node, ratio test) and PnP-RANSAC inliers that make a candidate
+    (ORB-SLAM2's 20)."""
     min_inliers: int = valid(50, 4, 100_000)
-    """PnP-RANSAC inliers that confirm a loop."""
+    """Inliers after the loop side's points are projected in and the pose refined that confirm a loop."""
+    consistency: int = valid(3, 0, 100)
+    """A candidate's covisibility group must have been a candidate for this many keyframes in a row
+    (ORB-SLAM2's 3): one look-alike view never closes a loop."""
+    vocabulary: str = ""
+    """ORB vocabulary file (.npz of `vtdslam train-vocab`); empty: the shipped one
+    (worker/slam/features/data/VOCABULARY.md)."""
+    descriptors_per_keyframe: int = valid(400, 10, 100_000)
+    """Unused since the trained vocabulary (issue 58: every descriptor of a keyframe is quantised); kept so that
+    saved configurations that set it still load."""
     min_correction_m: float = valid(0.02, 0.0, 100.0)
     """Loops whose correction is smaller than this (and < 1 degree) are accepted but not applied."""
-    descriptors_per_keyframe: int = valid(400, 10, 100_000)
-    """Strongest keypoints per keyframe kept for place recognition."""
 
 
 @dataclass

@@ -5,6 +5,8 @@ from dataclasses import dataclass
 
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig
+from worker.slam.features.bow_database import KeyframeDatabase
+from worker.slam.features.vocabulary import Vocabulary
 from worker.slam.map.map import Map
 from worker.slam.mapping.local_mapping import LocalMapper
 from worker.slam.mapping.loop_closure import LoopCloser
@@ -31,5 +33,8 @@ def build_slam(camera: Camera, config: PipelineConfig) -> SlamParts:
     tracker = Tracker(sensor, slam_map, config.tracking, config.features, config.mapping.new_point_max_depth_m,
                       config.dense.stride)
     mapper = LocalMapper(slam_map, config.mapping, sensor, config.tracking.huber_px)
-    closer = LoopCloser(slam_map, config.loop, sensor) if config.loop.enabled else None
+    vocab = Vocabulary.load(config.loop.vocabulary) if config.loop.vocabulary else Vocabulary.load()
+    places = KeyframeDatabase(vocab)  # relocalisation and loop closure share the keyframes' vectors
+    tracker.places = places
+    closer = LoopCloser(slam_map, config.loop, sensor, places) if config.loop.enabled else None
     return SlamParts(sensor, slam_map, tracker, mapper, closer)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from worker.slam.config import FeatureConfig, TrackingConfig
+from worker.slam.features.bow_database import KeyframeDatabase
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.projection import search_by_projection
 from worker.slam.features.search import KeypointIndex
@@ -72,6 +73,9 @@ class Tracker:
         self.map_starts = [0]
         #: The last successfully tracked frame's result (the pipeline hands its pose to the stages).
         self.last_result: TrackResult | None = None
+        #: Keyframe database of the run's vocabulary, shared with loop closure (set by `run.parts`); relocalisation
+        #: tries its candidates first.
+        self.places: KeyframeDatabase | None = None
 
     # ---- public ------------------------------------------------------------------------------------------
 
@@ -343,7 +347,8 @@ class Tracker:
 
     def _relocalise(self, feats: Features) -> tuple[PoseEstimate | None, np.ndarray]:
         none = (None, np.full(len(feats), -1, np.int64))
-        for kf_id in relocalisation_candidates(self.map, self.tc.reloc_keyframes, self.ref_kf):
+        for kf_id in relocalisation_candidates(self.map, self.tc.reloc_keyframes, self.ref_kf, self.places,
+                                               feats.desc):
             got = pnp_against_keyframe(self.map, kf_id, feats, self.K, self.tc.reloc_min_inliers)
             if got is None:
                 continue
