@@ -57,6 +57,7 @@ def oracle_copy(seq_dir: str, out: Path) -> str:
             (out / "truth" / p.name).symlink_to(p.resolve())
     (out / "truth" / "masks").mkdir()
     inst = InstanceTruth.of(src)
+    assert inst is not None, f"{src} has no per-instance truth"
     for i in range(len(inst.truth)):
         cv2.imwrite(str(out / "truth" / inst.truth.layout.mask.format(index=i)), inst[i].classes)
     return str(out)
@@ -157,7 +158,7 @@ def print_summary(rows: list[dict]) -> None:
         rs = [r for r in rows if r["movers"] == kind and r["preset"] == preset]
         refs = [_ref_ate(rows, r["sequence"]) for r in rs]
         pairs = [(r["ate"], f) for r, f in zip(rs, refs) if r["ate"] is not None and f]
-        ratio = _mean([a for a, _ in pairs]) / _mean([f for _, f in pairs]) if pairs else None
+        ratio = sum(a for a, _ in pairs) / sum(f for _, f in pairs) if pairs else None
         worst = max((a / f for a, f in pairs), default=None)
         inst = lambda k, rs=rs: _mean([(r["inst"] or {}).get(k) for r in rs])  # noqa: E731
         print(f"| {kind} | {preset} | {len(rs)} | {_fmt(_mean([r['ate'] for r in rs]), 4)} | {_fmt(ratio, 2)} | "

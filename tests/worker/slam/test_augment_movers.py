@@ -85,6 +85,7 @@ def test_moving_chair_has_an_exact_mask_and_class(chairs, static_source):
 
 def _world_points(seq: Sequence, index: int, mask: np.ndarray) -> np.ndarray:
     """(N, 3) world points of the pixels of `mask` with depth in frame `index`."""
+    assert seq.groundtruth is not None
     f, cam, T = seq[index], seq.camera, seq.groundtruth.poses[index]
     v, u = np.nonzero(mask & (f.depth > 0))
     z = f.depth[v, u]

@@ -89,7 +89,9 @@ def test_training_runs_on_a_tiny_image_set(tmp_path):
 
 
 def views_of(path) -> np.ndarray:
-    return OrbExtractor(FeatureConfig()).extract(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)).desc
+    gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    assert gray is not None, path
+    return OrbExtractor(FeatureConfig()).extract(gray).desc
 
 
 def test_training_refuses_evaluation_only_data(tmp_path):

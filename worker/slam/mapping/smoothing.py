@@ -64,7 +64,7 @@ def smooth_poses(poses: np.ndarray, stamps: np.ndarray, info: list[np.ndarray | 
     idx = np.flatnonzero(meas)
     col = -np.ones(F, int)
     col[idx] = np.arange(len(idx))
-    lam = np.stack([info[k] for k in idx]) / s.pixel_sigma**2
+    lam = np.stack([m for m in info if m is not None]) / s.pixel_sigma**2  # the frames of `idx`, in order
     # whitening of the second differences: velocity change over the mean interval, PSD q
     dt = np.maximum(np.diff(stamps), 1e-3)
     dt0, dt1 = dt[triples], dt[triples + 1]
