@@ -279,6 +279,7 @@ def _info(aug: AugmentedSequence) -> dict:
             "classes_mask": "classes/{index:06d}.png", "static_mask": "static/{index:06d}.png",
             "static_classes": [m.name for m in aug.static_classes],
             "static": [{"id": w.walker, "class": aug.class_of(w), "sprite": aug.sprites[w.sprite].source,
-                        "height_m": w.height, "floor_point": w.start.tolist(), "facing": None if w.facing is None else w.facing.tolist()}
+                        "height_m": w.height, "floor_point": w.start.tolist(),
+                        "facing": None if w.facing is None else w.facing.tolist()}
                        for w in aug.statics]})
     return info
