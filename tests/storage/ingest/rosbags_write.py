@@ -160,7 +160,12 @@ def write_bag(path: Path, spec: BagSpec) -> Path:
         if spec.gt:
             typ, msg = _gt_msg(ts, ros1, i, spec.gt)
             msgs.append(({"tf": "/tf"}.get(spec.gt, "/groundtruth/pose"), typ, t_ns, msg))
-    if ros1:
+    return _write(path, spec.kind, ts, msgs)
+
+
+def _write(path: Path, kind: str, ts: Any, msgs: list[tuple[str, str, int, Any]]) -> Path:
+    """Write ``msgs`` (topic, type, time ns, message; in time order) as a ``kind`` bag (ros1 | sqlite3 | mcap)."""
+    if kind == "ros1":
         from rosbags.rosbag1 import Writer as Writer1
 
         with Writer1(path) as w1:
@@ -173,7 +178,7 @@ def write_bag(path: Path, spec: BagSpec) -> Path:
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer as Writer2
 
-    plugin = StoragePlugin.MCAP if spec.kind == "mcap" else StoragePlugin.SQLITE3
+    plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
     with Writer2(path, version=9, storage_plugin=plugin) as w2:
         conns = {}
         for topic, typ, t_ns, msg in msgs:
@@ -183,14 +188,16 @@ def write_bag(path: Path, spec: BagSpec) -> Path:
     return path
 
 
-def folder_to_bag(src: Path, out: Path, n: int, depth_enc: str = "32FC1") -> Path:
-    """The first ``n`` colour frames of a TUM-layout folder (depth PNG at 5000/m, JPEG or PNG colour) as a ROS 1
-    bag: colour as CompressedImage (the file's own bytes), depth as ``depth_enc`` Image, ground truth as
-    PoseStamped on /groundtruth/pose; no CameraInfo (the caller's camera preset applies)."""
-    from rosbags.rosbag1 import Writer as Writer1
+def folder_to_bag(src: Path, out: Path, n: int, depth_enc: str = "32FC1", kind: str = "ros1",
+                  colour: str = "compressed") -> Path:
+    """The first ``n`` colour frames of a TUM-layout folder (depth PNG at 5000/m, JPEG or PNG colour) as a ``kind``
+    bag (ros1 | sqlite3 | mcap): colour as CompressedImage (the file's own bytes) or, with ``colour`` "rgb8", as a
+    raw Image of the decoded pixels; depth as ``depth_enc`` Image, ground truth as PoseStamped on
+    /groundtruth/pose; no CameraInfo (the caller's camera preset applies)."""
     from rosbags.typesys import Stores, get_typestore
 
-    ts = get_typestore(Stores.ROS1_NOETIC)
+    ros1 = kind == "ros1"
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.LATEST)
     types = ts.types
 
     def rows(name: str) -> list[list[str]]:
@@ -202,7 +209,8 @@ def folder_to_bag(src: Path, out: Path, n: int, depth_enc: str = "32FC1") -> Pat
         return types["builtin_interfaces/msg/Time"](sec=int(sec), nanosec=int((frac + "000000000")[:9]))
 
     def header(s: str, i: int, frame: str = "camera") -> Any:
-        return types["std_msgs/msg/Header"](seq=i, stamp=stamp(s), frame_id=frame)
+        hdr = types["std_msgs/msg/Header"]
+        return hdr(seq=i, stamp=stamp(s), frame_id=frame) if ros1 else hdr(stamp=stamp(s), frame_id=frame)
 
     def ns(s: str) -> int:
         st = stamp(s)
@@ -212,6 +220,14 @@ def folder_to_bag(src: Path, out: Path, n: int, depth_enc: str = "32FC1") -> Pat
     t_end = float(rgb[-1][0]) + 0.1
     msgs: list[tuple[str, str, int, Any]] = []
     for i, (t, rel) in enumerate(rgb):
+        if colour == "rgb8":
+            pix = cv2.imread(str(src / rel), cv2.IMREAD_COLOR)
+            assert pix is not None, rel
+            pix = np.ascontiguousarray(pix[..., ::-1])
+            msgs.append(("/camera/rgb/image_color", "sensor_msgs/msg/Image", ns(t), types["sensor_msgs/msg/Image"](
+                header=header(t, i), height=pix.shape[0], width=pix.shape[1], encoding="rgb8", is_bigendian=0,
+                step=pix.shape[1] * 3, data=pix.reshape(-1))))
+            continue
         msgs.append(("/camera/rgb/image_color/compressed", "sensor_msgs/msg/CompressedImage", ns(t),
                      types["sensor_msgs/msg/CompressedImage"](header=header(t, i), format="bgr8; jpeg compressed bgr8",
                                                               data=np.frombuffer((src / rel).read_bytes(), np.uint8))))
@@ -235,10 +251,4 @@ def folder_to_bag(src: Path, out: Path, n: int, depth_enc: str = "32FC1") -> Pat
         msgs.append(("/groundtruth/pose", "geometry_msgs/msg/PoseStamped", ns(g[0]),
                      types["geometry_msgs/msg/PoseStamped"](header=header(g[0], i, "world"), pose=pose)))
     msgs.sort(key=lambda m: m[2])
-    with Writer1(out) as writer:
-        conns: dict[str, Any] = {}
-        for topic, typ, t_ns, msg in msgs:
-            if topic not in conns:
-                conns[topic] = writer.add_connection(topic, typ, typestore=ts)
-            writer.write(conns[topic], t_ns, ts.serialize_ros1(msg, typ))
-    return out
+    return _write(out, kind, ts, msgs)
