@@ -151,7 +151,8 @@ class JobOut(BaseModel):
     status: JobStatus
     progress: float
     stage: str = Field(description="The running job's step: starting, tracking, dense, evaluation, writing, saving; "
-                       f"{FINISHED_STAGE!r} once it ended (its status says how); empty while queued.")
+                       f"{FINISHED_STAGE!r} once it succeeded or was cancelled; a failed job keeps the step "
+                       "it failed in (empty if it failed before its first step); empty while queued.")
     frames_done: int
     frames_total: int
     eta_s: float | None = Field(description="Estimated seconds left for the frames still to track, at the rate so "

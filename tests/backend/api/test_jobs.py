@@ -193,6 +193,7 @@ def test_retry_requeues_and_drops_old_results(client, db, settings, queue, seq_i
     job = new_job(client, seq_id)
     assert client.post(f"/api/v1/jobs/{job['id']}/retry").status_code == 409  # still queued
     complete(db, settings, job["id"], JobStatus.FAILED)
+    assert client.get(f"/api/v1/jobs/{job['id']}").json()["stage"] == "tracking"  # where it failed, not "done"
     assert client.get(f"/api/v1/jobs/{job['id']}/artifacts").json()
     r = client.post(f"/api/v1/jobs/{job['id']}/retry")
     assert r.status_code == 200, r.text

@@ -15,7 +15,7 @@
       ["Sequence", seqInfo ? seqInfo.name : job.sequence_id.slice(0, 8)],
       ["Ground truth", seqInfo ? (!seqInfo.has_groundtruth ? "no" : seqInfo.groundtruth_frame && seqInfo.groundtruth_frame !== "camera" ? `yes, the ${seqInfo.groundtruth_frame}'s pose` : "yes") : "—"],
       ["Preset", job.preset],
-      ["Stage", job.status === "running" ? job.stage || "—" : job.status === "queued" ? "waiting" : job.status === "succeeded" ? "finished" : job.status === "cancelled" ? "cancelled" : "stopped"],
+      ["Stage", job.status === "running" ? job.stage || "—" : job.status === "queued" ? "waiting" : job.status === "succeeded" ? "finished" : job.status === "cancelled" ? "cancelled" : job.status === "failed" && job.stage ? `failed at ${job.stage}` : "stopped"],
       ["Frames", job.frames_total ? `${job.frames_done} of ${job.frames_total}` : "—"],
       ["Queued", when(job.created_at)],
       ["Run time", seconds(jobDuration(job))],
