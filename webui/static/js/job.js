@@ -91,6 +91,7 @@
       ["Frames rescued by held-back keypoints", m.rescued_frames, 0, ""],
       ["Frames re-extracted around moving objects", dig(m, "culling", "frames_refilled"), 0, ""],
       ["Keyframes", m.keyframes, 0, ""], ["Frames re-solved against the final map", m.frames_refit, 0, ""],
+      ["Frames moved by the end-of-run smoothing", m.frames_smoothed, 0, ""],
       ["Loops closed", m.loops_applied, 0, ""],
       ["Poses matched to ground truth", m.matched_poses, 0, ""], ["Speed, whole pipeline", m.fps, 2, "frames/s"],
       ["Speed, tracking only", m.tracking_fps, 2, "frames/s"], ["Map points", m.map_points, 0, ""],
