@@ -142,10 +142,11 @@ class TruthScores:
 
 
 _COUNTS = ("frames", "tracked", "lost", "relocalisations", "new_maps", "map_merges", "established_switches",
-           "rescued_frames", "last_pose_retries", "frames_refit", "keyframes", "map_points", "fused_observations",
-           "loops", "loops_applied")
+           "rescued_frames", "last_pose_retries", "frames_refit", "frames_smoothed", "keyframes", "map_points",
+           "fused_observations", "loops", "loops_applied")
 _CORE = (*_COUNTS, "fps", "tracking_fps", "tracking_cpu_ms", "timings_ms", "overlapped_stages", "dense_points",
-         "stage_info", "peak_rss_mb", "camera", "preset", "start", "tracked_fraction", "warnings")
+         "stage_info", "peak_rss_mb", "camera", "preset", "start", "tracked_fraction", "warnings",
+         "smoothing_skipped")
 _LABELS = ("groundtruth_frame", "ate_against", "ate_corrected_against", "rpe_against")
 _EVALUATION = ("ate", "matched_poses", "rpe", *_LABELS, "ate_corrected", "rpe_frame", "evaluation_error")
 _PROVENANCE = PROVENANCE_KEYS  # ("version", "commit"): written after the core keys when known
@@ -175,6 +176,9 @@ class RunMetrics:
     last_pose_retries: int | None = None
     frames_refit: int | None = None
     """Frames re-solved against the final map."""
+    frames_smoothed: int | None = None
+    """Frames the end-of-run smoothing (``mapping.smooth_frames``) moved; 0 when it did not run
+    (:attr:`smoothing_skipped` says why); None for runs older than the count."""
     keyframes: int | None = None
     map_points: int | None = None
     """Map points alive at the end."""
@@ -207,6 +211,9 @@ class RunMetrics:
     """``tracked / frames`` (0..1): below 1, trajectory.txt holds only the tracked frames' poses."""
     warnings: list[str] = field(default_factory=list)
     """What a user should know about the result (frames that were not tracked, ...); empty when nothing."""
+    smoothing_skipped: str | None = None
+    """Why the end-of-run frame smoothing did not run (``mapping.smooth_frames`` or ``mapping.refit_frames``
+    off); None when it ran, and for runs older than this key."""
     version: str | None = None
     """The vtdslam package version that produced the run (``formats.version``); None for older runs."""
     commit: str | None = None
@@ -261,6 +268,7 @@ class RunMetrics:
             peak_rss_mb=number(d.get("peak_rss_mb")), camera=_dict(d.get("camera")) or {},
             preset=preset if isinstance(preset, str) else None, start=_count(d.get("start")),
             tracked_fraction=number(d.get("tracked_fraction")), warnings=_strings(d.get("warnings")),
+            smoothing_skipped=_string(d.get("smoothing_skipped")),
             version=version if isinstance(version, str) else None, commit=commit if isinstance(commit, str) else None,
             stages=stages,
             ate=ErrorStats.from_dict(d.get("ate")), matched_poses=_count(d.get("matched_poses")),

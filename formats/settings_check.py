@@ -42,11 +42,14 @@ def settings_ranges() -> dict[str, dict[str, Any]]:
 
 
 def kind_of(default: Any) -> str:
-    """The spec type of a setting whose default is ``default`` (bools before ints: a bool is an int)."""
-    for kind, name in ((bool, "bool"), (int, "int"), (float, "float"), (str, "str")):
+    """The spec type of a setting whose default is ``default`` (bools before ints: a bool is an int):
+    ``bool``, ``int``, ``float``, ``str`` (checked), ``list`` (a tuple too), ``dict``, ``null`` or the
+    Python type's name (published, not checked)."""
+    for kind, name in ((bool, "bool"), (int, "int"), (float, "float"), (str, "str"), (list | tuple, "list"),
+                       (dict, "dict")):
         if isinstance(default, kind):
             return name
-    return "any"
+    return "null" if default is None else type(default).__name__
 
 
 def check_setting(key: str, value: Any, kind: str, bounds: tuple[float, float] | None = None) -> Any:

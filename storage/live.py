@@ -35,6 +35,11 @@ LIVE_JOB = "live_job"
 while it receives follows the stream too, and leaves the session alone when it ends)."""
 LIVE_ENDED = "ended"
 """``Sequence.meta['live']`` after the stream ended: an ordinary sequence (a retried job runs it offline)."""
+STREAMING_STAGE = "live"
+"""A live job's stage while its stream is open: ``frames_done`` of ``frames_total`` received so far, which
+grows (caught up when they are equal: it waits for frames, it is not finishing)."""
+FINISHING_STAGE = "finishing"
+"""A live job's stage once its stream ended: the run's finish (dense map, evaluation, saving)."""
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from storage.live import LiveSpool, SpooledFrame, StreamEnd
+from storage.live import FINISHING_STAGE, STREAMING_STAGE, LiveSpool, SpooledFrame, StreamEnd
 from worker.runner import CancelFn, Cancelled, ProgressFn, RunOutput
 from worker.snapshots import PartialWriter
 
@@ -80,7 +80,7 @@ def run_live_slam(sequence_dir: Path, camera: dict[str, Any], preset: str, overr
         stages = shipped_catalog().build_stages(config, reader.camera)
     with PipelineRun(reader.camera, config, stages, on_step=snapshot) as run:
         _follow(run, follower, reader, (first, frame), snapshot, progress)
-        progress(follower.processed, follower.received, "finishing")
+        progress(follower.processed, follower.received, FINISHING_STAGE)
         run.sequence = Sequence(sequence_dir, reader.camera)  # complete now: its ground truth scores the run
         result = run.finish()
     result.metrics.update({f"live_{k}": v for k, v in follower.counts().items()})
@@ -113,7 +113,7 @@ def _follow(run: Any, follower: _Follower, reader: _FrameReader, first: tuple[Sp
                 snapshot.arrival(ref.index, ref.arrival)
                 snapshot.counts.update(follower.counts())
             run.step(item)
-            progress(follower.processed, follower.received, "live")
+            progress(follower.processed, follower.received, STREAMING_STAGE)
             if ahead is None:
                 try:
                     ahead = pool.submit(load, follower.next())

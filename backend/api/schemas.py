@@ -11,6 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from formats import artifacts
 from formats.camera_spec import groundtruth_frame_of
 from formats.run_metrics import with_current_spelling
+from storage.live import STREAMING_STAGE
 from storage.models import Batch, Job, JobStatus, Sequence
 from storage.presets import DEFAULT_PIPELINE_PRESET
 from storage.repositories.batches import ComparisonRow
@@ -150,13 +151,16 @@ class JobOut(BaseModel):
     preset: str
     status: JobStatus
     progress: float
-    stage: str = Field(description="The running job's step: starting, tracking, dense, evaluation, writing, saving; "
-                       f"{FINISHED_STAGE!r} once it ended (its status says how); empty while queued.")
+    stage: str = Field(description="The running job's step: starting, tracking, dense, evaluation, writing, saving "
+                       "(a live session: waiting for frames, live while its stream is open, then finishing); "
+                       f"{FINISHED_STAGE!r} once it succeeded or was cancelled; a failed job keeps the step "
+                       "it failed in (empty if it failed before its first step); empty while queued.")
     frames_done: int
     frames_total: int
     eta_s: float | None = Field(description="Estimated seconds left for the frames still to track, at the rate so "
                                 "far; null once every frame is tracked (the run is finishing: dense map, evaluation, "
-                                "saving) and when the job is not running.")
+                                "saving), while a live session's stream is open (stage 'live': frames_total is what "
+                                "it received so far) and when the job is not running.")
     config: dict[str, Any]
     error: str | None
     timings: dict[str, Any] = Field(description="All milliseconds: the run's mean time per call by step (as "
@@ -240,7 +244,7 @@ def eta_seconds(job: Job) -> float | None:
     long as they take would be wrong (the dashboard says "finishing" instead)."""
     if job.status != JobStatus.RUNNING or job.started_at is None or job.frames_done <= 0:
         return None
-    if job.frames_done >= job.frames_total:
+    if job.frames_done >= job.frames_total or job.stage == STREAMING_STAGE:  # an open stream's end is unknown
         return None
     elapsed = (datetime.now(UTC) - job.started_at).total_seconds()
     left = max(0, job.frames_total - job.frames_done)

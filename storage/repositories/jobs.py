@@ -26,7 +26,8 @@ ACTIVE = (JobStatus.QUEUED, JobStatus.RUNNING)
 RETRYABLE = (JobStatus.FAILED, JobStatus.CANCELLED)
 
 FINISHED_STAGE = "done"
-"""The stage of a job that ended (succeeded, failed or cancelled): its status says how."""
+"""The stage of a job that succeeded or was cancelled: its status says how. A failed job keeps the stage it
+failed in (``tracking``, ``saving``...; empty if it failed before its first step), so its page says where."""
 
 RUN_MS = "run_ms"
 """The key of a job's ``timings`` (all milliseconds) holding the whole pipeline call; older jobs stored seconds
@@ -279,7 +280,9 @@ def finish(
         raise InvalidInput(f"unknown status {status!r}") from None
     if not status.is_terminal:
         raise InvalidInput(f"finish needs a final status, not {status.value}")
-    values: dict[str, Any] = {"status": status, "finished_at": utcnow(), "error": error, "stage": FINISHED_STAGE}
+    values: dict[str, Any] = {"status": status, "finished_at": utcnow(), "error": error}
+    if status != JobStatus.FAILED:  # a failed job keeps the step it failed in
+        values["stage"] = FINISHED_STAGE
     if status == JobStatus.SUCCEEDED:
         values["progress"] = 1.0
     if timings is not None:
@@ -391,7 +394,7 @@ def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeu
         stmt = (  # this death follows automatic requeues after earlier ones: a poison job
             update(Job)
             .where(*running, Job.requeues >= POISON_DEATHS - 1, Job.cancel_requested.is_(False))
-            .values(status=JobStatus.FAILED, finished_at=utcnow(), stage=FINISHED_STAGE,
+            .values(status=JobStatus.FAILED, finished_at=utcnow(),  # stage: the step it died in
                     error=POISON_ERROR.format(deaths=POISON_DEATHS))
             .returning(Job.id)
             .execution_options(synchronize_session=False)
@@ -400,7 +403,7 @@ def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeu
         stmt = (
             update(Job)
             .where(*running)
-            .values(status=JobStatus.FAILED, finished_at=utcnow(), stage=FINISHED_STAGE, error=error)
+            .values(status=JobStatus.FAILED, finished_at=utcnow(), error=error)  # stage: the step it died in
             .returning(Job.id)
             .execution_options(synchronize_session=False)
         )

@@ -17,12 +17,13 @@ from formats.run_metrics import (
 STATS = {"rmse": 0.03, "mean": 0.02, "median": 0.02, "std": 0.01, "max": 0.06}
 PIPELINE = {  # a metrics.json as run_pipeline writes it, key order included
     "frames": 30, "tracked": 29, "lost": 1, "relocalisations": 0, "new_maps": 0, "map_merges": 0,
-    "established_switches": 0, "rescued_frames": 0, "last_pose_retries": 0, "frames_refit": 28, "keyframes": 2,
+    "established_switches": 0, "rescued_frames": 0, "last_pose_retries": 0, "frames_refit": 28, "frames_smoothed": 28,
+    "keyframes": 2,
     "map_points": 656, "fused_observations": 0, "loops": 0, "loops_applied": 0, "fps": 6.76, "tracking_fps": None,
     "tracking_cpu_ms": 18.885, "timings_ms": {"read": 0.396, "tracking": 33.5}, "overlapped_stages": ["culling"],
     "dense_points": 13879, "stage_info": {"features_removed": 23.1}, "peak_rss_mb": 731.9,
     "camera": {"fx": 535.4, "dist": [0.0, 0.0], "name": "synthetic"}, "preset": "full", "start": 0,
-    "tracked_fraction": 0.9667, "warnings": ["1 of 30 frames (3.3 %) were not tracked"],
+    "tracked_fraction": 0.9667, "warnings": ["1 of 30 frames (3.3 %) were not tracked"], "smoothing_skipped": None,
     "version": "0.1.0", "commit": "8bdf8d68c02ddbe3c3f56e9aae6238f801917b4f",
     "culling": {"features_removed": 694, "truth": {"mask_iou": 0.17, "feature_precision": 0.85,
                                                    "feature_recall": 0.72, "frames_scored": {"mask": 29}}},

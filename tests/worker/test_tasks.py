@@ -129,7 +129,7 @@ def test_failures_become_failed_jobs_with_the_message(ctx, job_id, error, messag
     ctx.pipeline = FakePipeline(error=error)
     assert execute_job(ctx, job_id) == JobStatus.FAILED
     job = _job(ctx, job_id)
-    assert message in job.error and job.stage == jobs.FINISHED_STAGE
+    assert message in job.error and job.stage == "tracking"  # the step it failed in, not "done"
     assert "Traceback" in ctx.store.path(job_id, "log.txt").read_text()
     with ctx.session_factory() as s:
         assert metrics.get_frame_stats(s, job_id) == []

@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from formats.settings_check import kind_of
 from worker.slam.catalog import shipped_catalog
 
 RANGES_FILE = Path(__file__).resolve().parents[2] / "formats" / "settings_ranges.json"
@@ -38,7 +39,7 @@ def _walk(obj: Any, prefix: str, out: dict[str, dict[str, Any]]) -> None:
         if dataclasses.is_dataclass(value):
             _walk(value, key, out)
             continue
-        entry: dict[str, Any] = {"type": _type_name(value), "default": _json_value(value)}
+        entry: dict[str, Any] = {"type": kind_of(value), "default": _json_value(value)}
         bounds = f.metadata.get("range")
         if bounds is not None:
             entry["min"], entry["max"] = bounds
@@ -46,14 +47,6 @@ def _walk(obj: Any, prefix: str, out: dict[str, dict[str, Any]]) -> None:
             if rel in f.metadata:
                 entry[rel] = f"{prefix}.{f.metadata[rel]}"
         out[key] = entry
-
-
-def _type_name(value: Any) -> str:
-    for kind, name in ((bool, "bool"), (int, "int"), (float, "float"), (str, "str"), (list | tuple, "list"),
-                       (dict, "dict")):
-        if isinstance(value, kind):
-            return name
-    return "null" if value is None else type(value).__name__
 
 
 def _json_value(value: Any) -> Any:

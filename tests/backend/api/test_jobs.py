@@ -8,6 +8,7 @@ import pytest
 from formats import catalog
 from storage.artifacts import ArtifactStore
 from storage.db import make_engine, make_session_factory
+from storage.live import STREAMING_STAGE
 from storage.models import Job, JobStatus
 from storage.presets import CAMERA_PRESETS, PIPELINE_PRESETS
 from storage.repositories import jobs, metrics
@@ -153,6 +154,16 @@ def test_list_filters_and_paging(client, db, settings, seq_id, seq_tgz):
     assert c["sequence_id"] == other
 
 
+def test_a_live_job_with_its_stream_open_has_no_eta(client, db, settings, seq_id):
+    job = new_job(client, seq_id)
+    complete(db, settings, job["id"], JobStatus.RUNNING)  # 3 of 6 frames tracked: an estimate
+    assert client.get(f"/api/v1/jobs/{job['id']}").json()["eta_s"] is not None
+    with db() as s:  # 3 of the 6 frames received so far: the stream's end, so its time left, is unknown
+        jobs.update_progress(s, job["id"], frames_done=3, frames_total=6, stage=STREAMING_STAGE)
+    got = client.get(f"/api/v1/jobs/{job['id']}").json()
+    assert got["stage"] == "live" and got["eta_s"] is None
+
+
 def test_running_job_has_progress_and_eta_then_metrics(client, db, settings, seq_id):
     job = new_job(client, seq_id)
     complete(db, settings, job["id"], JobStatus.RUNNING)
@@ -193,6 +204,7 @@ def test_retry_requeues_and_drops_old_results(client, db, settings, queue, seq_i
     job = new_job(client, seq_id)
     assert client.post(f"/api/v1/jobs/{job['id']}/retry").status_code == 409  # still queued
     complete(db, settings, job["id"], JobStatus.FAILED)
+    assert client.get(f"/api/v1/jobs/{job['id']}").json()["stage"] == "tracking"  # where it failed, not "done"
     assert client.get(f"/api/v1/jobs/{job['id']}/artifacts").json()
     r = client.post(f"/api/v1/jobs/{job['id']}/retry")
     assert r.status_code == 200, r.text

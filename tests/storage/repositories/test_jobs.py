@@ -205,8 +205,10 @@ def test_reap_orphaned_without_requeues_fails(session: Session, seq: Sequence) -
     assert jobs.reap_orphaned(session, worker="host1-1").failed == [a.id]
     got = jobs.get(session, a.id)
     assert (got.status, got.error) == (JobStatus.FAILED, "the worker stopped before the job finished")
-    assert got.stage == jobs.FINISHED_STAGE
+    assert got.stage == ""  # it died before its first step: no step to name
+    jobs.update_progress(session, b.id, stage="dense")
     assert jobs.reap_orphaned(session).failed == [b.id]
+    assert jobs.get(session, b.id).stage == "dense"  # the step its worker died in
     assert jobs.reap_orphaned(session).failed == []
     assert jobs.get(session, c.id).status == JobStatus.SUCCEEDED
     assert jobs.get(session, queued.id).status == JobStatus.QUEUED
@@ -316,12 +318,16 @@ def test_discard_results(session: Session, job: Job) -> None:
     assert metrics.get_frame_stats(session, job.id) == []
 
 
-def test_every_way_of_ending_sets_the_final_stage(session: Session, job: Job) -> None:
+def test_ending_sets_the_final_stage_but_a_failure_keeps_the_step_it_failed_in(session: Session, job: Job) -> None:
     jobs.claim(session, job.id, "w")
     jobs.update_progress(session, job.id, stage="saving", frames_done=5, frames_total=5)
-    assert jobs.finish(session, job.id, "failed", error="disk full").stage == jobs.FINISHED_STAGE
+    assert jobs.finish(session, job.id, "failed", error="disk full").stage == "saving"
     queued = jobs.create(session, sequence_id=job.sequence_id, preset="orb-only")
     assert jobs.request_cancel(session, queued.id).stage == jobs.FINISHED_STAGE
+    running = jobs.create(session, sequence_id=job.sequence_id, preset="orb-only")
+    jobs.claim(session, running.id, "w")
+    jobs.update_progress(session, running.id, stage="tracking")
+    assert jobs.finish(session, running.id, "cancelled").stage == jobs.FINISHED_STAGE
 
 
 def test_timings_in_milliseconds_and_run_seconds_read_old_and_new_jobs() -> None:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 
 import numpy as np
 import pytest
@@ -138,13 +139,19 @@ def test_redkitchen_slice_tracks_accurately(redkitchen, tmp_path):
     assert m["dense_points"] > 10_000
 
 
-def test_frames_are_refit_against_the_final_map_and_keyframes_keep_their_poses(room_seq):
+def test_frames_are_refit_against_the_final_map_and_keyframes_keep_their_poses(room_seq, caplog):
+    caplog.set_level(logging.INFO, logger="worker.slam.run.pipeline_run")
     off = run_pipeline(Sequence(room_seq), get_preset("orb-only", {"dense.enabled": False,
                                                                     "mapping.refit_frames": False}))
     on = run_pipeline(Sequence(room_seq), get_preset("orb-only", {"dense.enabled": False,
                                                                    "mapping.smooth_frames": False}))
     n_kf = on.metrics["keyframes"]
     assert off.metrics["frames_refit"] == 0
+    # no refit, no smoothing (it weighs the frames by their refit): recorded and logged, as is turning it off
+    assert off.metrics["frames_smoothed"] == 0 and "mapping.refit_frames is off" in off.metrics["smoothing_skipped"]
+    assert (on.metrics["frames_smoothed"], on.metrics["smoothing_skipped"]) == (0, "mapping.smooth_frames is off")
+    skips = [r.getMessage() for r in caplog.records if r.getMessage().startswith("frame smoothing skipped")]
+    assert len(skips) == 2 and "mapping.refit_frames is off" in skips[0]
     assert 0 < on.metrics["frames_refit"] <= 40 - n_kf and "frame_refit" in on.metrics["timings_ms"]
     assert np.array_equal(on.keyframes.poses, off.keyframes.poses)
     moved = np.abs(on.trajectory.poses - off.trajectory.poses).max(axis=(1, 2)) > 0
@@ -170,6 +177,7 @@ def test_smoothing_moves_frames_and_keyframes_and_lowers_the_frame_to_frame_erro
     assert "frame_smoothing" in smooth.metrics["timings_ms"] and "frame_smoothing" not in plain.metrics["timings_ms"]
     moved = np.abs(smooth.trajectory.poses - plain.trajectory.poses).max(axis=(1, 2)) > 0
     assert moved.sum() > 0.9 * len(moved)  # keyframes' frame poses too, not only the refitted frames
+    assert smooth.metrics["frames_smoothed"] == moved.sum() and smooth.metrics["smoothing_skipped"] is None
     assert np.array_equal(smooth.keyframes.poses, plain.keyframes.poses)  # the map is left as BA made it
     rpe = lambda r: r.metrics["rpe_frame"]["trans"]["rmse"]  # noqa: E731
     assert rpe(smooth) < 0.5 * rpe(plain)  # seen: 3.1 -> 0.4 mm

@@ -131,9 +131,15 @@ const VTD = (() => {
 
   /** What is left of a running job: "about 12 s left" while frames are tracked (the api's eta_s: the frames
    *  left at the rate so far), "frames done, finishing…" once they are (dense map, evaluation, saving: no
-   *  estimate, rather than "0.0 s left" for as long as they take); "" otherwise. */
+   *  estimate, rather than "0.0 s left" for as long as they take); "" otherwise. A live session's stream is
+   *  open while its stage is "live" (storage.live.STREAMING_STAGE): all its received frames processed means
+   *  caught up and waiting for more, not finishing (its stage says "finishing" once the stream ended). */
   function etaText(job) {
     if (job.status !== "running") return "";
+    if (job.stage === "live") {
+      const of = `${job.frames_done} of ${job.frames_total} received frames processed`;
+      return job.frames_done >= job.frames_total ? `caught up: ${of}, waiting for frames` : of;
+    }
     if (job.frames_total > 0 && job.frames_done >= job.frames_total) return "frames done, finishing…";
     return isNum(job.eta_s) ? `about ${seconds(job.eta_s)} left` : "";
   }

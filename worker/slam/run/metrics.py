@@ -13,12 +13,14 @@ from worker.slam.run.timer import StageTimer
 
 
 def run_metrics(log: FrameLog, parts: SlamParts, timer: StageTimer, *, loop_s: float, frames_refit: int,
-                overlapped: set[str], dense_points: int, camera: Camera, preset: str, start: int) -> dict:
-    """The 28 run-level entries of metrics.json, then the code's version and git commit (`formats.version`);
+                frames_smoothed: int, smoothing_skipped: str | None, overlapped: set[str], dense_points: int,
+                camera: Camera, preset: str, start: int) -> dict:
+    """The 30 run-level entries of metrics.json, then the code's version and git commit (`formats.version`);
     the stages' summaries and the evaluation follow them.
 
     `loop_s`: wall time of the frame loop (s); `frames_refit`: frames re-solved against the final map;
-    `overlapped`: stages whose work ran ahead on another thread; `dense_points`: points in map.ply."""
+    `frames_smoothed`: frames the end-of-run smoothing moved; `smoothing_skipped`: why it did not run (None: it
+    ran); `overlapped`: stages whose work ran ahead on another thread; `dense_points`: points in map.ply."""
     tracked = np.array(log.tracked, dtype=bool)
     total = len(log)
     tracker, smap, closer = parts.tracker, parts.map, parts.closer
@@ -27,7 +29,7 @@ def run_metrics(log: FrameLog, parts: SlamParts, timer: StageTimer, *, loop_s: f
         "relocalisations": log.relocalisations, "new_maps": log.new_maps, "map_merges": log.merges,
         "established_switches": tracker.established_switches,
         "rescued_frames": tracker.rescued_frames, "last_pose_retries": tracker.last_pose_retries,
-        "frames_refit": frames_refit,
+        "frames_refit": frames_refit, "frames_smoothed": frames_smoothed,
         "keyframes": len(smap), "map_points": smap.points.n_alive, "fused_observations": parts.mapper.fused,
         "loops": closer.n_loops if closer else 0, "loops_applied": closer.n_applied if closer else 0,
         "fps": round(total / loop_s, 2) if loop_s > 0 else None,
@@ -40,9 +42,19 @@ def run_metrics(log: FrameLog, parts: SlamParts, timer: StageTimer, *, loop_s: f
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "camera": camera.to_dict(), "preset": preset, "start": start,
         "tracked_fraction": round(float(tracked.mean()), 4) if total else None,
-        "warnings": lost_warnings(tracked, start),
+        "warnings": lost_warnings(tracked, start), "smoothing_skipped": smoothing_skipped,
         **provenance(),
     }
+
+
+def smoothing_skipped(smooth_frames: bool, refit_ran: bool, keyframes: int) -> str | None:
+    """Why the end-of-run frame smoothing does not run (it weighs each frame by its refit's information, so
+    it needs `mapping.refit_frames` and a map), or None when it runs."""
+    if not smooth_frames:
+        return "mapping.smooth_frames is off"
+    if not refit_ran:
+        return "mapping.refit_frames is off (the smoothing weighs the frames by their refit)"
+    return None if keyframes else "the map is empty"
 
 
 def lost_warnings(tracked: np.ndarray, start: int) -> list[str]:

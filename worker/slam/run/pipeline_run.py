@@ -12,6 +12,7 @@ outputs against it (`truth_observer`); its scores are the "truth" entries of the
 """
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -35,7 +36,7 @@ from worker.slam.run.callbacks import ProgressFn
 from worker.slam.run.deferred import DeferredWork
 from worker.slam.run.evaluation import RunEvaluation, evaluate_run
 from worker.slam.run.frame_log import FrameLog
-from worker.slam.run.metrics import run_metrics, with_truth
+from worker.slam.run.metrics import run_metrics, smoothing_skipped, with_truth
 from worker.slam.run.parts import SlamParts, build_slam
 from worker.slam.run.previews import PreviewPicker
 from worker.slam.run.result import RunResult
@@ -45,6 +46,8 @@ from worker.slam.run.truth_observer import TruthObserver
 from worker.slam.stages import FrameInputs, FrameStage, StageContext, TrackedPose
 from worker.slam.tracking.result import TrackResult
 from worker.slam.truth import Truth
+
+log = logging.getLogger(__name__)
 
 StepFn = Callable[["PipelineRun", Frame, FrameInputs, TrackResult], None]
 """Called after each frame's step with the run, the frame, what its stages made of it and its tracking result
@@ -180,11 +183,12 @@ class PipelineRun:
             self.parts.mapper.global_bundle_adjust(self.config.mapping.global_ba_iterations)
             self.timer.lap("global_ba")
         self._progress("dense")
-        every, n_refit = self._trajectory()
+        every, n_refit, n_smoothed, smoothing_skip = self._trajectory()
         traj = Trajectory(every.timestamps[tracked], every.poses[tracked])  # no pose for a frame never tracked
         kf_traj = Trajectory(np.array([kf.timestamp for kf in smap.keyframes]), smap.poses())
         cloud = self._dense_map(every, tracked)
         metrics = run_metrics(self.log, self.parts, self.timer, loop_s=loop_s, frames_refit=n_refit,
+                              frames_smoothed=n_smoothed, smoothing_skipped=smoothing_skip,
                               overlapped=self.stages.overlapped, dense_points=int(len(cloud[0])) if cloud else 0,
                               camera=self.camera, preset=self.config.name, start=self.start)
         truth = self.observer.summaries(self.stages.names()) if self.observer is not None else {}
@@ -216,22 +220,28 @@ class PipelineRun:
         return (f"{head}: at most {log.most_with_depth} features with a valid depth in a frame, too few to start "
                 f"a map (tracking.init_min_points {self.config.tracking.init_min_points})")
 
-    def _trajectory(self) -> tuple[Trajectory, int]:
+    def _trajectory(self) -> tuple[Trajectory, int, int, str | None]:
         """Every frame's final T_WC, lost ones too (through its reference keyframe, re-solved against the final map
-        when `mapping.refit_frames`, then smoothed when `mapping.smooth_frames`), and how many frames were
-        re-solved. Starts the timer's lap of "dense"."""
+        when `mapping.refit_frames`, then smoothed when `mapping.smooth_frames`), how many frames were re-solved,
+        how many the smoothing moved and why it did not run (None when it ran). Starts the timer's lap of "dense"."""
         smap, mc = self.parts.map, self.config.mapping
         self.timer.mark()
         poses = self.log.poses(smap)
-        n_refit = 0
+        n_refit = n_smoothed = 0
+        skipped = smoothing_skipped(mc.smooth_frames, self.log.matches is not None, len(smap))
         if self.log.matches is not None and len(smap):
             n_refit, info = refit_poses(poses, self.log.matches, smap.points, self.parts.sensor, self.config.tracking)
             self.timer.lap("frame_refit")  # "dense" times the dense map alone
             if mc.smooth_frames:
                 settings = SmootherSettings(mc.smooth_accel_sigma, mc.smooth_angular_sigma)
-                poses = smooth_poses(poses, np.asarray(self.log.stamps, dtype=np.float64), info, settings)
+                smoothed = smooth_poses(poses, np.asarray(self.log.stamps, dtype=np.float64), info, settings)
+                n_smoothed = int(np.any(smoothed != poses, axis=(1, 2)).sum())
+                poses = smoothed
                 self.timer.lap("frame_smoothing")
-        return Trajectory(np.array(self.log.stamps, dtype=np.float64), orthonormalize(poses)), n_refit
+        if skipped is not None:
+            log.info("frame smoothing skipped: %s", skipped)
+        traj = Trajectory(np.array(self.log.stamps, dtype=np.float64), orthonormalize(poses))
+        return traj, n_refit, n_smoothed, skipped
 
     def _dense_map(self, traj: Trajectory, tracked: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """The dense map (M,3) float32 xyz, (M,3) uint8 RGB of the keyframes at their final poses."""

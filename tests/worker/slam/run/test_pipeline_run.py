@@ -16,10 +16,10 @@ from worker.slam.sensor import SensorModel
 
 # metrics.json's run-level keys, in order (read by the repositories, the dashboard and the batch table)
 RUN_KEYS = ["frames", "tracked", "lost", "relocalisations", "new_maps", "map_merges", "established_switches",
-            "rescued_frames", "last_pose_retries", "frames_refit", "keyframes", "map_points", "fused_observations",
-            "loops", "loops_applied", "fps", "tracking_fps", "tracking_cpu_ms", "timings_ms", "overlapped_stages",
-            "dense_points", "stage_info", "peak_rss_mb", "camera", "preset", "start", "tracked_fraction",
-            "warnings", "version", "commit"]
+            "rescued_frames", "last_pose_retries", "frames_refit", "frames_smoothed", "keyframes", "map_points",
+            "fused_observations", "loops", "loops_applied", "fps", "tracking_fps", "tracking_cpu_ms", "timings_ms",
+            "overlapped_stages", "dense_points", "stage_info", "peak_rss_mb", "camera", "preset", "start",
+            "tracked_fraction", "warnings", "smoothing_skipped", "version", "commit"]
 
 
 @pytest.fixture(scope="module")
@@ -72,6 +72,7 @@ def test_run_metrics_keys_in_order():
     cfg = get_preset("orb-only")
     with PipelineRun(PRESETS["tum3"], cfg, []) as run:
         run.timer.lap("tracking")
-        m = run_metrics(run.log, run.parts, run.timer, loop_s=0.0, frames_refit=0, overlapped=set(),
+        m = run_metrics(run.log, run.parts, run.timer, loop_s=0.0, frames_refit=0, frames_smoothed=0,
+                        smoothing_skipped=None, overlapped=set(),
                         dense_points=0, camera=PRESETS["tum3"], preset=cfg.name, start=0)
     assert list(m) == RUN_KEYS
