@@ -39,16 +39,18 @@ class PoseEstimate:
 
 def optimize_pose(T_WC: np.ndarray, X_w: np.ndarray, uv: np.ndarray, z: np.ndarray, info: np.ndarray,
                   K: np.ndarray, bf: float, huber_px: float = 2.45, rounds: int = 4,
-                  iterations: int = 8, weights: np.ndarray | None = None) -> PoseEstimate:
+                  iterations: int = 8, weights: np.ndarray | None = None,
+                  depth_w: np.ndarray | None = None) -> PoseEstimate:
     """Refine `T_WC` from (N,3) world points `X_w` seen at (N,2) pixels `uv` with (N,) depths `z` (0 = none).
 
     `info` (N,) inverse variance of each keypoint (1/scale^2 of its octave). `bf` = fx * virtual baseline.
     `weights` (N,) prior weight of each match in (0, 1], multiplying the robust weights (None = all 1).
+    `depth_w` (N,) scale of each depth residual (`features.depth.depth_weights`; None = all 1).
     """
     n = len(X_w)
     T_CW = inv(T_WC)
     obs, has = rp.observations(uv, z, bf)
-    roww = rp.residual_weights(has)
+    roww = rp.residual_weights(has, depth_w)
     thr = np.where(has, CHI2_STEREO, CHI2_MONO)
     prior = np.ones(n) if weights is None else np.asarray(weights, np.float64)
     inl = np.ones(n, bool)

@@ -56,9 +56,12 @@ def jacobian_pose(Pc: np.ndarray, Jp: np.ndarray) -> np.ndarray:
     return J
 
 
-def residual_weights(has_depth: np.ndarray) -> np.ndarray:
-    """(N,3) per-row weights: the u_r row counts only where the keypoint has depth."""
+def residual_weights(has_depth: np.ndarray, depth_w: np.ndarray | None = None) -> np.ndarray:
+    """(N,3) per-row weights: the u_r row counts only where the keypoint has depth, scaled by `depth_w` (N,)
+    (each keypoint's depth sigma against the virtual baseline's; None = 1)."""
     w = np.ones((len(has_depth), 3))
+    if depth_w is not None:
+        w[:, 2] = depth_w
     w[~has_depth, 2] = 0.0
     return w
 

@@ -135,7 +135,10 @@ def _build_problem(slam_map: Map, local: list[int], fixed: list[int], point_set:
     octv = np.concatenate([kfs[cams[ci]].feats.octave[kp_idx[ci]] for ci in range(len(cams))])
     info = inv_sigma2[octv]
     obs, has = rp.observations(uv, z, bf)
-    roww = rp.residual_weights(has)
+    dws = [kfs[k].feats.depth_w for k in cams]
+    dw = None if all(d is None for d in dws) else np.concatenate(
+        [np.ones(len(kp_idx[ci]), np.float32) if dws[ci] is None else dws[ci][kp_idx[ci]] for ci in range(len(cams))])
+    roww = rp.residual_weights(has, dw)
     return _Problem(cams, len(local), point_set, c, p, kpi, obs, has, roww, info)
 
 
