@@ -33,8 +33,6 @@ class SensorModel:
     depth_sigma_k: float = 0.0
     """> 0: each keypoint's depth weighs by its own sigma (`features.depth_sigma_per_m2`, registered depth only);
     0: by the virtual baseline alone."""
-    depth_sigma_online: bool = True
-    """The per-keypoint depth sigmas weigh in tracking and local BA too, not only at the end of the run."""
 
     @classmethod
     def build(cls, camera: Camera, features: FeatureConfig, tracking: TrackingConfig) -> SensorModel:
@@ -43,8 +41,7 @@ class SensorModel:
         return cls(K=_frozen(camera.K), bf=camera.fx * baseline, size=(camera.width, camera.height),
                    scales=_frozen(scales), inv_sigma2=_frozen(1.0 / scales**2),
                    dist=_frozen(np.asarray(camera.dist)) if camera.has_distortion else None,
-                   depth_sigma_k=features.depth_sigma_per_m2 if camera.depth_registered else 0.0,
-                   depth_sigma_online=not features.depth_sigma_final_only)
+                   depth_sigma_k=features.depth_sigma_per_m2 if camera.depth_registered else 0.0)
 
     @property
     def sigmas(self) -> np.ndarray:

@@ -82,15 +82,13 @@ class _NormalBlocks:
 
 
 def local_bundle_adjust(slam_map: Map, local: list[int], K: np.ndarray, bf: float, inv_sigma2: np.ndarray,
-                        iterations: int = 6, huber_px: float = 2.45, max_fixed: int = 20,
-                        depth_w: bool = True) -> BAStats | None:
-    """Optimise the poses of keyframes `local` and all points they see, in place in `slam_map`; `depth_w`: the
-    keypoints' own depth weights where they have them (`Features.depth_w`), else the virtual baseline's."""
+                        iterations: int = 6, huber_px: float = 2.45, max_fixed: int = 20) -> BAStats | None:
+    """Optimise the poses of keyframes `local` and all points they see, in place in `slam_map`."""
     point_set = np.unique(np.concatenate([slam_map.alive_ids(slam_map.keyframes[i]) for i in local]))
     if len(point_set) < 10:
         return None
     local, fixed = _variable_and_fixed(slam_map, local, max_fixed)
-    prob = _build_problem(slam_map, local, fixed, point_set, bf, inv_sigma2, depth_w)
+    prob = _build_problem(slam_map, local, fixed, point_set, bf, inv_sigma2)
     T_CW = inv(np.stack([slam_map.keyframes[k].T_WC for k in prob.cams]))
     first = _evaluate(prob, T_CW, slam_map.points.pos[point_set].copy(), K, bf, huber_px)
     est = _levenberg_marquardt(prob, first, K, bf, iterations, huber_px)
@@ -116,7 +114,7 @@ def _variable_and_fixed(slam_map: Map, local: list[int], max_fixed: int) -> tupl
 
 
 def _build_problem(slam_map: Map, local: list[int], fixed: list[int], point_set: np.ndarray, bf: float,
-                   inv_sigma2: np.ndarray, use_depth_w: bool = True) -> _Problem:
+                   inv_sigma2: np.ndarray) -> _Problem:
     """Every observation by keyframes `local` + `fixed` of the points `point_set`, with its measurement."""
     kfs = slam_map.keyframes
     lookup = np.full(len(slam_map.points), -1, np.int64)
@@ -138,9 +136,9 @@ def _build_problem(slam_map: Map, local: list[int], fixed: list[int], point_set:
     z = np.concatenate([kfs[cams[ci]].feats.depth[kp_idx[ci]] for ci in range(len(cams))])
     octv = np.concatenate([kfs[cams[ci]].feats.octave[kp_idx[ci]] for ci in range(len(cams))])
     info = inv_sigma2[octv]
-    dws = [kfs[k].feats.depth_w if use_depth_w else None for k in cams]
-    ur_u = 1.0 if all(d is None for d in dws) else 0.0
+    ur_u = 1.0 if all(kfs[k].feats.depth_w is None for k in cams) else 0.0
     obs, has = rp.observations(uv, z, bf, ur_u)
+    dws = [kfs[k].feats.depth_w for k in cams]
     dw = None if all(d is None for d in dws) else np.concatenate(
         [np.ones(len(kp_idx[ci]), np.float32) if dws[ci] is None else dws[ci][kp_idx[ci]] for ci in range(len(cams))])
     roww = rp.residual_weights(has, dw)

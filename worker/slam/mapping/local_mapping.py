@@ -38,7 +38,6 @@ class LocalMapper:
         """`huber_px`: the robust kernel's width in BA (the tracker's, `tracking.huber_px`)."""
         self.map, self.cfg, self.K, self.bf = slam_map, cfg, sensor.K, sensor.bf
         self.inv_sigma2, self.huber_px = sensor.inv_sigma2, huber_px
-        self.depth_sigma_online = sensor.depth_sigma_online
         self.n_processed = 0
         self.culled = 0
         self.triangulated = 0
@@ -61,8 +60,7 @@ class LocalMapper:
             return
         local = [kf.id] + self.map.best_covisible(kf.id, self.cfg.local_ba_keyframes - 1)
         self.last_ba = local_bundle_adjust(self.map, local, self.K, self.bf, self.inv_sigma2,
-                                           self.cfg.local_ba_iterations, self.huber_px,
-                                           depth_w=self.depth_sigma_online)
+                                           self.cfg.local_ba_iterations, self.huber_px)
 
     def global_bundle_adjust(self, iterations: int) -> BAStats | None:
         """All keyframes and points; the first keyframe holds the gauge."""
