@@ -55,13 +55,7 @@ class FeatureConfig:
     depth_edge_radius_px: int = valid(0, 0, 64)
     """> 0: keypoints within this many pixels of a depth edge or hole get no depth (colour/depth misregistration)."""
     depth_sigma_per_m2: float = valid(0.0, 0.0, 1.0)
-    """> 0: each keypoint's depth weighs by its own sigma in pose optimisation, BA and the frame refit, in place
-    of the virtual baseline's z^2/(fx b): sqrt((k z^2)^2 + (half the depth range in its window)^2), with k this
-    value (structured light: ~0.0015 m^-1, Khoshelham & Elberink 2012), so flat surfaces weigh by the sensor
-    and depth edges, holes and slopes hardly; registered depth only. 0 = off. Measured:
-    docs/results/jitter.md#depth-weighed-per-keypoint"""
-    depth_sigma_radius_px: int = valid(2, 1, 16)
-    """Half-side of the window whose depth range sets a keypoint's depth sigma (`depth_sigma_per_m2`)."""
+    """> 0: depth weighed per keypoint (`depth_weights`); off: docs/results/jitter.md#depth-weighed-per-keypoint"""
 
 
 @dataclass

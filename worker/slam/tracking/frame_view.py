@@ -54,7 +54,7 @@ def frame_view(rgb: np.ndarray, depth: np.ndarray, given: TrackInputs, extractor
         extra.depth[missing] = lookup_depth(extra.uv[missing], used_depth, fc.min_depth_m, fc.max_depth_m)
         feats = Features.concat([feats, extra])
     if sensor.depth_sigma_k > 0 and len(feats):
-        dw = depth_weights(feats.uv, feats.depth, used_depth, sensor.bf, sensor.depth_sigma_k, fc.depth_sigma_radius_px)
+        dw = depth_weights(feats.uv, feats.depth, used_depth, sensor.bf, sensor.depth_sigma_k)
         feats = dataclasses.replace(feats, depth_w=dw)
     dense_depth = used_depth
     if exclude_mask is not None and restored_depth is None:
