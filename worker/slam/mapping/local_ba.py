@@ -136,11 +136,11 @@ def _build_problem(slam_map: Map, local: list[int], fixed: list[int], point_set:
     z = np.concatenate([kfs[cams[ci]].feats.depth[kp_idx[ci]] for ci in range(len(cams))])
     octv = np.concatenate([kfs[cams[ci]].feats.octave[kp_idx[ci]] for ci in range(len(cams))])
     info = inv_sigma2[octv]
-    ur_u = 1.0 if all(kfs[k].feats.depth_w is None for k in cams) else 0.0
-    obs, has = rp.observations(uv, z, bf, ur_u)
     dws = [kfs[k].feats.depth_w for k in cams]
     dw = None if all(d is None for d in dws) else np.concatenate(
-        [np.ones(len(kp_idx[ci]), np.float32) if dws[ci] is None else dws[ci][kp_idx[ci]] for ci in range(len(cams))])
+        [np.ones(len(kp), np.float32) if d is None else d[kp] for d, kp in zip(dws, kp_idx)])
+    ur_u = 1.0 if dw is None else 0.0
+    obs, has = rp.observations(uv, z, bf, ur_u)
     roww = rp.residual_weights(has, dw)
     return _Problem(cams, len(local), point_set, c, p, kpi, obs, has, roww, info, ur_u)
 
