@@ -54,6 +54,8 @@ class FeatureConfig:
     """Depth above this is treated as invalid (noisy far range)."""
     depth_edge_radius_px: int = valid(0, 0, 64)
     """> 0: keypoints within this many pixels of a depth edge or hole get no depth (colour/depth misregistration)."""
+    depth_sigma_per_m2: float = valid(0.0, 0.0, 1.0)
+    """> 0: depth weighed per keypoint (`depth_weights`); off: docs/results/jitter.md#depth-weighed-per-keypoint"""
 
 
 @dataclass

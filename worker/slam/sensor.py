@@ -30,6 +30,9 @@ class SensorModel:
     """(levels,) float64: 1/sigma^2 of a keypoint's position per octave, 1/scale^2 (ORB-SLAM2's invSigma2)."""
     dist: np.ndarray | None
     """(5,) float64 OpenCV coefficients (k1, k2, p1, p2, k3) of the colour image; None: no distortion."""
+    depth_sigma_k: float = 0.0
+    """> 0: each keypoint's depth weighs by its own sigma (`features.depth_sigma_per_m2`, registered depth only);
+    0: by the virtual baseline alone."""
 
     @classmethod
     def build(cls, camera: Camera, features: FeatureConfig, tracking: TrackingConfig) -> SensorModel:
@@ -37,7 +40,8 @@ class SensorModel:
         scales = features.scale_factor ** np.arange(features.n_levels)
         return cls(K=_frozen(camera.K), bf=camera.fx * baseline, size=(camera.width, camera.height),
                    scales=_frozen(scales), inv_sigma2=_frozen(1.0 / scales**2),
-                   dist=_frozen(np.asarray(camera.dist)) if camera.has_distortion else None)
+                   dist=_frozen(np.asarray(camera.dist)) if camera.has_distortion else None,
+                   depth_sigma_k=features.depth_sigma_per_m2 if camera.depth_registered else 0.0)
 
     @property
     def sigmas(self) -> np.ndarray:

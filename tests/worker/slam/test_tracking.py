@@ -68,7 +68,8 @@ def test_pnp_and_motion_only_ba_recover_known_pose_with_outliers():
 
 
 @pytest.mark.parametrize("robust", [True, False])
-def test_compiled_step_terms_are_the_numpy_expressions_bit_for_bit(robust):
+@pytest.mark.parametrize("ur_u", [1.0, 0.0])
+def test_compiled_step_terms_are_the_numpy_expressions_bit_for_bit(robust, ur_u):
     """Motion-only BA's compiled per-observation terms against the numpy expressions they replace (residual at
     (1, 1, 1) behind the camera, Huber weights, prior weights, observations without depth): equal bits, so the
     trajectories stay byte-identical."""
@@ -79,17 +80,17 @@ def test_compiled_step_terms_are_the_numpy_expressions_bit_for_bit(robust):
     Pc[:7, 2] = rng.uniform(-1, 1e-3, 7)  # behind or on the camera plane
     z = np.where(rng.random(n) < 0.8, Pc[:, 2] + rng.normal(0, 0.02, n), 0.0)
     uv = rp.project(np.where(Pc[:, 2:3] > 1e-3, Pc, 1.0), K_SYN, bf)[:, :2] + rng.normal(0, 2, (n, 2))
-    obs, has = rp.observations(uv, z, bf)
-    roww = rp.residual_weights(has)
+    obs, has = rp.observations(uv, z, bf, ur_u)
+    roww = rp.residual_weights(has, None if ur_u == 1.0 else rng.uniform(0.1, 12.0, n))
     info = 1.2 ** -rng.integers(0, 8, n).astype(float) * 2
     good = (rng.random(n) < 0.9) & (Pc[:, 2] > 1e-3)
     prior = rng.uniform(0.2, 1.0, n)
-    e = (obs - rp.project(np.where(Pc[:, 2:3] > 1e-3, Pc, 1.0), K_SYN, bf)) * roww
+    e = (obs - rp.project(np.where(Pc[:, 2:3] > 1e-3, Pc, 1.0), K_SYN, bf, ur_u)) * roww
     chi2 = info * (e**2).sum(1)
     w = np.where(good, info * (rp.huber_weights(chi2, 2.45) if robust else 1.0) * prior, 0.0)
-    J = rp.jacobian_pose(Pc, rp.jacobian_point(Pc, K_SYN, bf)) * roww[:, :, None]
+    J = rp.jacobian_pose(Pc, rp.jacobian_point(Pc, K_SYN, bf, ur_u)) * roww[:, :, None]
     got = rp.pose_step_terms(Pc, obs, roww, info, good, prior, K_SYN[0, 0], K_SYN[1, 1], K_SYN[0, 2],
-                             K_SYN[1, 2], bf, 2.45, robust)
+                             K_SYN[1, 2], bf, 2.45, robust, ur_u)
     for a, b in zip(got, (e, J, J * w[:, None, None])):
         assert a.shape == b.shape and np.array_equal(a, b)
 

@@ -41,6 +41,34 @@ def lookup_depth(uv: np.ndarray, depth: np.ndarray, min_m: float, max_m: float,
     return z
 
 
+def depth_weights(uv: np.ndarray, z: np.ndarray, depth: np.ndarray, bf: float, k_per_m2: float,
+                  radius: int = 2) -> np.ndarray:
+    """(N,) float32 weight of each keypoint's depth residual relative to the virtual baseline's (u_r row scale).
+
+    The u_r = u - bf/z residual with a 1-pixel sigma stands for a depth sigma of z^2/bf, the same for every
+    keypoint. Here each keypoint gets its own depth sigma from the image: the sensor's z-squared law k*z^2
+    (structured light) combined with half the depth range in a (2r+1)^2 window around its raw pixel `uv` (N,2),
+    which is large at depth edges, mixed pixels and steep slopes (where a pixel's error in position is one in
+    depth) and small on flat surfaces; a hole in the window counts as a range of z. Weight = (z^2/bf) / sigma.
+    `z` (N,) the keypoints' depth (0 = none: weight 1, unused); `depth` (H,W) float32 metres, 0 = invalid.
+    """
+    w = np.ones(len(uv), np.float32)
+    has = z > 0
+    if not has.any():
+        return w
+    h, wd = depth.shape
+    r = np.arange(-radius, radius + 1)
+    uu = np.clip(np.rint(uv[has, 0]).astype(int)[:, None, None] + r[None, None, :], 0, wd - 1)
+    vv = np.clip(np.rint(uv[has, 1]).astype(int)[:, None, None] + r[None, :, None], 0, h - 1)
+    win = depth[vv, uu].reshape(int(has.sum()), -1)
+    zk = z[has].astype(np.float64)
+    hole = (win <= 0).any(1)
+    spread = np.where(hole, zk, 0.5 * (win.max(1) - np.where(win > 0, win, np.inf).min(1)))
+    sigma = np.sqrt((k_per_m2 * zk**2) ** 2 + spread**2)
+    w[has] = zk**2 / (bf * np.maximum(sigma, 1e-9))
+    return w
+
+
 def backproject(uv: np.ndarray, z: np.ndarray, K: np.ndarray) -> np.ndarray:
     """(N,3) camera-frame points from (N,2) pixels `uv` and (N,) depths `z` (metres, along the optical axis)."""
     x = (uv[:, 0] - K[0, 2]) / K[0, 0] * z

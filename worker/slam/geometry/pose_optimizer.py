@@ -39,16 +39,20 @@ class PoseEstimate:
 
 def optimize_pose(T_WC: np.ndarray, X_w: np.ndarray, uv: np.ndarray, z: np.ndarray, info: np.ndarray,
                   K: np.ndarray, bf: float, huber_px: float = 2.45, rounds: int = 4,
-                  iterations: int = 8, weights: np.ndarray | None = None) -> PoseEstimate:
+                  iterations: int = 8, weights: np.ndarray | None = None,
+                  depth_w: np.ndarray | None = None) -> PoseEstimate:
     """Refine `T_WC` from (N,3) world points `X_w` seen at (N,2) pixels `uv` with (N,) depths `z` (0 = none).
 
     `info` (N,) inverse variance of each keypoint (1/scale^2 of its octave). `bf` = fx * virtual baseline.
     `weights` (N,) prior weight of each match in (0, 1], multiplying the robust weights (None = all 1).
+    `depth_w` (N,) scale of each depth residual (`features.depth.depth_weights`; None = all 1); given, the
+    depth row is the disparity alone (`reprojection`, `ur_u` 0).
     """
     n = len(X_w)
     T_CW = inv(T_WC)
-    obs, has = rp.observations(uv, z, bf)
-    roww = rp.residual_weights(has)
+    ur_u = 1.0 if depth_w is None else 0.0
+    obs, has = rp.observations(uv, z, bf, ur_u)
+    roww = rp.residual_weights(has, depth_w)
     thr = np.where(has, CHI2_STEREO, CHI2_MONO)
     prior = np.ones(n) if weights is None else np.asarray(weights, np.float64)
     inl = np.ones(n, bool)
@@ -61,7 +65,7 @@ def optimize_pose(T_WC: np.ndarray, X_w: np.ndarray, uv: np.ndarray, z: np.ndarr
             if good.sum() < 3:
                 break
             e, J, Jw = rp.pose_step_terms(Pc, obs, roww, info, good, prior, K[0, 0], K[1, 1], K[0, 2], K[1, 2],
-                                          float(bf), float(huber_px), robust)
+                                          float(bf), float(huber_px), robust, ur_u)
             Jw = Jw.reshape(-1, 6)
             H = Jw.T @ J.reshape(-1, 6)
             b = Jw.T @ e.ravel()
@@ -74,21 +78,21 @@ def optimize_pose(T_WC: np.ndarray, X_w: np.ndarray, uv: np.ndarray, z: np.ndarr
                 break
         Pc = X_w @ T_CW[:3, :3].T + T_CW[:3, 3]
         front = Pc[:, 2] > 1e-3
-        e = (obs - rp.project(np.where(front[:, None], Pc, 1.0), K, bf)) * roww
+        e = (obs - rp.project(np.where(front[:, None], Pc, 1.0), K, bf, ur_u)) * roww
         chi2 = np.where(front, info * (e**2).sum(1), np.inf)
         inl = chi2 < thr
         if inl.sum() < 10:
             break
     T_CW = orthonormalize(T_CW)
-    return PoseEstimate(inv(T_CW), inl, _covariance(T_CW, X_w[inl], info[inl], roww[inl], K, bf), chi2)
+    return PoseEstimate(inv(T_CW), inl, _covariance(T_CW, X_w[inl], info[inl], roww[inl], K, bf, ur_u), chi2)
 
 
 def _covariance(T_CW: np.ndarray, X_w: np.ndarray, info: np.ndarray, roww: np.ndarray, K: np.ndarray,
-                bf: float) -> np.ndarray | None:
+                bf: float, ur_u: float) -> np.ndarray | None:
     if len(X_w) < 4:
         return None
     Pc = X_w @ T_CW[:3, :3].T + T_CW[:3, 3]
-    J = rp.jacobian_pose(Pc, rp.jacobian_point(Pc, K, bf)) * roww[:, :, None]
+    J = rp.jacobian_pose(Pc, rp.jacobian_point(Pc, K, bf, ur_u)) * roww[:, :, None]
     Jf = J.reshape(-1, 6)
     H = (J * info[:, None, None]).reshape(-1, 6).T @ Jf
     try:

@@ -33,6 +33,8 @@ class FrameMatches:
     depth: np.ndarray
     octave: np.ndarray
     keyframe: bool = False
+    depth_w: np.ndarray | None = None
+    """(M,) float16 scale of each depth residual (`features.depth.depth_weights`); None = all 1."""
 
 
 @dataclass
@@ -43,7 +45,7 @@ class FrameMatchLog:
     frames: list[FrameMatches | None] = field(default_factory=list)
 
     def add(self, point_ids: np.ndarray, uv: np.ndarray, depth: np.ndarray, octave: np.ndarray,
-            keep: bool, keyframe: bool = False) -> None:
+            keep: bool, keyframe: bool = False, depth_w: np.ndarray | None = None) -> None:
         """`point_ids` (N,) int64 per keypoint (-1 = unmatched) with the keypoints' `uv` (N,2), `depth` (N,),
         `octave` (N,); `keep` False records the frame as not refittable (lost); `keyframe`: BA owns its pose."""
         if not keep:
@@ -51,7 +53,8 @@ class FrameMatchLog:
             return
         m = point_ids >= 0
         self.frames.append(FrameMatches(point_ids[m].astype(np.int32), uv[m].astype(np.float32),
-                                        depth[m].astype(np.float32), octave[m].astype(np.int8), keyframe))
+                                        depth[m].astype(np.float32), octave[m].astype(np.int8), keyframe,
+                                        None if depth_w is None else depth_w[m].astype(np.float16)))
 
 
 def refit_poses(poses: np.ndarray, log: FrameMatchLog, points: MapPoints, sensor: SensorModel,
@@ -72,7 +75,8 @@ def refit_poses(poses: np.ndarray, log: FrameMatchLog, points: MapPoints, sensor
         ids = m.ids[alive]
         est = optimize_pose(poses[k], points.pos[ids], m.uv[alive].astype(np.float64),
                             m.depth[alive].astype(np.float64), sensor.inv_sigma2[m.octave[alive]], sensor.K,
-                            sensor.bf, tc.huber_px, tc.ba_rounds, tc.ba_iterations)
+                            sensor.bf, tc.huber_px, tc.ba_rounds, tc.ba_iterations,
+                            depth_w=None if m.depth_w is None else m.depth_w[alive].astype(np.float64))
         if est.n_inliers < tc.min_matches:
             continue
         if not m.keyframe:

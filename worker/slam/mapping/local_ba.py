@@ -49,6 +49,8 @@ class _Problem:
     has: np.ndarray
     roww: np.ndarray
     info: np.ndarray
+    ur_u: float = 1.0
+    """The depth row's u coefficient (`reprojection`): 0 (disparity alone) when depths carry their own weights."""
 
 
 @dataclass(frozen=True)
@@ -134,9 +136,13 @@ def _build_problem(slam_map: Map, local: list[int], fixed: list[int], point_set:
     z = np.concatenate([kfs[cams[ci]].feats.depth[kp_idx[ci]] for ci in range(len(cams))])
     octv = np.concatenate([kfs[cams[ci]].feats.octave[kp_idx[ci]] for ci in range(len(cams))])
     info = inv_sigma2[octv]
-    obs, has = rp.observations(uv, z, bf)
-    roww = rp.residual_weights(has)
-    return _Problem(cams, len(local), point_set, c, p, kpi, obs, has, roww, info)
+    dws = [kfs[k].feats.depth_w for k in cams]
+    dw = None if all(d is None for d in dws) else np.concatenate(
+        [np.ones(len(kp), np.float32) if d is None else d[kp] for d, kp in zip(dws, kp_idx)])
+    ur_u = 1.0 if dw is None else 0.0
+    obs, has = rp.observations(uv, z, bf, ur_u)
+    roww = rp.residual_weights(has, dw)
+    return _Problem(cams, len(local), point_set, c, p, kpi, obs, has, roww, info, ur_u)
 
 
 def _evaluate(prob: _Problem, T_CW: np.ndarray, X: np.ndarray, K: np.ndarray, bf: float,
@@ -145,7 +151,7 @@ def _evaluate(prob: _Problem, T_CW: np.ndarray, X: np.ndarray, K: np.ndarray, bf
     c, p = prob.c, prob.p
     Pc = np.einsum("nij,nj->ni", T_CW[c, :3, :3], X[p]) + T_CW[c, :3, 3]
     front = Pc[:, 2] > 1e-3
-    e = (prob.obs - rp.project(np.where(front[:, None], Pc, 1.0), K, bf)) * prob.roww
+    e = (prob.obs - rp.project(np.where(front[:, None], Pc, 1.0), K, bf, prob.ur_u)) * prob.roww
     chi2 = np.where(front, prob.info * (e**2).sum(1), 1e6)
     s = np.sqrt(chi2)
     cost = float(np.where(s <= huber_px, chi2, 2 * huber_px * s - huber_px**2).sum())
@@ -189,7 +195,7 @@ def _linearise(prob: _Problem, est: _Estimate, K: np.ndarray, bf: float, huber_p
     """The normal equations' blocks at `est`, with IRLS Huber weights."""
     c, p, front = prob.c, prob.p, est.front
     w = prob.info * rp.huber_weights(est.chi2, huber_px) * front
-    Jp = rp.jacobian_point(np.where(front[:, None], est.Pc, 1.0), K, bf) * prob.roww[:, :, None]
+    Jp = rp.jacobian_point(np.where(front[:, None], est.Pc, 1.0), K, bf, prob.ur_u) * prob.roww[:, :, None]
     JX = Jp @ est.T_CW[c, :3, :3]
     var = c < prob.n_var
     cv, pv = c[var], p[var]

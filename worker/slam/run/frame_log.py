@@ -59,7 +59,7 @@ class FrameLog:
         self.rel.append(_relative(slam_map, res))
         if self.matches is not None:
             self.matches.add(res.point_ids, res.feats.uv, res.feats.depth, res.feats.octave, bool(res.ok),
-                             keyframe=res.keyframe is not None)
+                             keyframe=res.keyframe is not None, depth_w=res.feats.depth_w)
         return row
 
     def poses(self, slam_map: Map) -> np.ndarray:

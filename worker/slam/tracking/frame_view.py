@@ -1,13 +1,14 @@
 """One frame as the tracker sees it: its keypoints (given by the stages or extracted here) and its images."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from worker.slam.config import FeatureConfig
-from worker.slam.features.depth import lookup_depth
+from worker.slam.features.depth import depth_weights, lookup_depth
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.types import Features
 from worker.slam.sensor import SensorModel
@@ -52,6 +53,9 @@ def frame_view(rgb: np.ndarray, depth: np.ndarray, given: TrackInputs, extractor
         missing = extra.depth <= 0
         extra.depth[missing] = lookup_depth(extra.uv[missing], used_depth, fc.min_depth_m, fc.max_depth_m)
         feats = Features.concat([feats, extra])
+    if sensor.depth_sigma_k > 0 and len(feats):
+        dw = depth_weights(feats.uv, feats.depth, used_depth, sensor.bf, sensor.depth_sigma_k)
+        feats = dataclasses.replace(feats, depth_w=dw)
     dense_depth = used_depth
     if exclude_mask is not None and restored_depth is None:
         dense_depth = np.where(exclude_mask, 0.0, depth).astype(np.float32)
@@ -65,4 +69,4 @@ def undistorted(feats: Features, sensor: SensorModel) -> Features:
         return feats
     und = cv2.undistortPoints(feats.uv.reshape(-1, 1, 2), sensor.K, sensor.dist, P=sensor.K)
     return Features(und.reshape(-1, 2).astype(np.float64), feats.octave, feats.response, feats.desc,
-                    feats.depth, uv_raw=feats.uv)
+                    feats.depth, uv_raw=feats.uv, depth_w=feats.depth_w)

@@ -276,7 +276,8 @@ class Tracker:
         def solve(weights: np.ndarray | None = None) -> PoseEstimate:
             return optimize_pose(T_WC, self.map.points.pos[ids], feats.uv[kp], feats.depth[kp],
                                  self.sensor.inv_sigma2[feats.octave[kp]], self.K, self.sensor.bf, self.tc.huber_px,
-                                 self.tc.ba_rounds, self.tc.ba_iterations, weights)
+                                 self.tc.ba_rounds, self.tc.ba_iterations, weights,
+                                 None if feats.depth_w is None else feats.depth_w[kp])
 
         est = solve()
         n = self.tc.established_frames
