@@ -52,7 +52,8 @@ def test_pairs_below_and_at_most() -> None:
 
 
 def test_kind_of_a_default() -> None:
-    got = [kind_of(v) for v in (True, 1, 1.0, "x", None, (1,), [1], {}, 1j)]
+    defaults: tuple[object, ...] = (True, 1, 1.0, "x", None, (1,), [1], {}, 1j)
+    got = [kind_of(v) for v in defaults]
     assert got == ["bool", "int", "float", "str", "null", "list", "list", "dict", "complex"]
     assert check_setting("a.b", [1, "x"], kind_of((1,))) == [1, "x"]  # published, not checked
 
