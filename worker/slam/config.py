@@ -13,8 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from formats.errors import SpecError
-from formats.settings_check import PAIR_RULES, check_pair, check_setting, kind_of
+from worker.slam.config_values import apply_values, expand_dotted
 from worker.slam.errors import ConfigError
 
 
@@ -306,7 +305,7 @@ class PipelineConfig:
     def with_overrides(self, overrides: dict) -> PipelineConfig:
         """A copy with nested (`{"tracking": {"ratio": 0.8}}`) or dotted (`{"tracking.ratio": 0.8}`) values."""
         cfg = copy.deepcopy(self)
-        for key, val in _expand_dotted(overrides).items():
+        for key, val in expand_dotted(overrides).items():
             if key == "name":
                 cfg.name = str(val)
             elif key == "stages":
@@ -317,7 +316,7 @@ class PipelineConfig:
                 if not isinstance(val, dict):
                     raise ConfigError(f"config section {key!r} must be an object")
                 target = cfg.section(key)
-                updated = _apply(target, val, key)
+                updated = apply_values(target, val, key)
                 if key in _CORE:
                     setattr(cfg, key, updated)
                 else:
@@ -325,83 +324,3 @@ class PipelineConfig:
             else:
                 raise ConfigError(f"unknown config section {key!r}; known: {sorted(_CORE + tuple(cfg.extra))}")
         return cfg
-
-
-def _expand_dotted(d: dict) -> dict:
-    """`{"a.b.c": 1, "a.b.d": 2}` -> `{"a": {"b": {"c": 1, "d": 2}}}` (merged deeply, not overwritten)."""
-    out: dict[str, Any] = {}
-    for key, val in d.items():
-        if "." in key:
-            head, _, rest = key.partition(".")
-            key, val = head, _expand_dotted({rest: val})
-        elif isinstance(val, dict):
-            val = _expand_dotted(val)
-        if isinstance(val, dict) and isinstance(out.get(key), dict):
-            out[key] = _merge(out[key], val)
-        elif key in out and (isinstance(val, dict) or isinstance(out[key], dict)):
-            raise ConfigError(f"config key {key!r} is given both as a value and as a section")
-        else:
-            out[key] = val
-    return out
-
-
-def _merge(a: dict, b: dict) -> dict:
-    out = dict(a)
-    for k, v in b.items():
-        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
-
-
-def _apply(obj: Any, values: dict, where: str) -> Any:
-    """Set `values` on the dataclass `obj`; returns it (or, for a frozen dataclass, an updated copy)."""
-    fields = {f.name: f for f in dataclasses.fields(obj)}
-    changes: dict[str, Any] = {}
-    for key, val in values.items():
-        if key not in fields:
-            raise ConfigError(f"unknown config field {where}.{key}", detail={"field": f"{where}.{key}"})
-        cur = getattr(obj, key)
-        if dataclasses.is_dataclass(cur) and isinstance(val, dict):
-            changes[key] = _apply(cur, val, f"{where}.{key}")
-        elif isinstance(cur, tuple) and isinstance(val, (list, tuple)):
-            changes[key] = tuple(val)
-        else:
-            changes[key] = _coerce(cur, val, f"{where}.{key}", fields[key].metadata.get("range"))
-    if type(obj).__dataclass_params__.frozen:
-        try:
-            obj = dataclasses.replace(obj, **changes)  # runs the section's own checks (__post_init__)
-        except ValueError as exc:
-            raise ConfigError(f"invalid value in {where}: {exc}", detail={"field": where}) from exc
-    else:
-        for key, val in changes.items():
-            setattr(obj, key, val)
-        check = getattr(obj, "__post_init__", None)
-        if check is not None and changes:
-            try:
-                check()
-            except ValueError as exc:
-                raise ConfigError(f"invalid value in {where}: {exc}", detail={"field": where}) from exc
-    _check_pairs(obj, where)
-    return obj
-
-
-def _check_pairs(obj: Any, where: str) -> None:
-    """Each ``below``/``at_most`` pair of ``obj`` (see :func:`valid`) in order, else a :class:`ConfigError`
-    naming both fields (``formats.settings_check``'s rule, which the api applies to the published ranges)."""
-    for f in dataclasses.fields(obj):
-        for rule in PAIR_RULES:
-            other = f.metadata.get(rule)
-            if other is None:
-                continue
-            try:
-                check_pair(rule, f"{where}.{f.name}", getattr(obj, f.name), f"{where}.{other}", getattr(obj, other))
-            except SpecError as exc:
-                raise ConfigError(exc.message, detail=exc.detail) from exc
-
-
-def _coerce(current: Any, val: Any, where: str, bounds: tuple[float, float] | None = None) -> Any:
-    """``val`` with the field's type (bools stay bools, ints stay ints) and within its ``bounds``, so a bad
-    snapshot fails early and clearly: ``formats.settings_check``'s rules, the api's too."""
-    try:
-        return check_setting(where, val, kind_of(current), bounds)
-    except SpecError as exc:
-        raise ConfigError(exc.message, detail=exc.detail) from exc

@@ -4,7 +4,8 @@ import pytest
 
 from tests.worker.slam.dynamic.scene import K
 from tests.worker.slam.dynamic.test_culling import run
-from worker.slam.config import ConfigError, _apply
+from worker.slam.config import ConfigError
+from worker.slam.config_values import apply_values as _apply
 from worker.slam.dynamic.object_motion import ObjectMotionConfig, estimate_object_motion
 from worker.slam.dynamic.threshold import ThresholdConfig, adaptive_threshold, motion_entropy, object_threshold
 
