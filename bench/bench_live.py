@@ -1,8 +1,8 @@
 """Live session benchmark: stream a sequence at a fixed rate into the embedded service (`vtdslam serve`: api, worker
 and viewer hub as separate processes on this machine) and print what a user of the page sees.
 
-    PYTHONPATH=. VTD_SHARED_DIR=/work/shared python bench/bench_live.py \
-        [--seq /work/shared/data/bonn_crowd_dev] [--camera bonn] [--preset no-restoration] [--rate 30]
+    .venv/bin/python bench/bench_live.py \
+        [--seq ../shared/data/bonn_crowd_dev] [--camera bonn] [--preset no-restoration] [--rate 30]
 
 Measured: the delay from a frame's arrival at the api to its pose being readable on the job page's endpoint
 (`GET /jobs/{id}/partial`, polled here every `--poll` seconds, 0.1 by default; the page polls every 0.5 s) and,

@@ -1,6 +1,6 @@
 """Refresh the README's pictures in docs/pictures/: what the product looks like.
 
-    PYTHONPATH=. python docs/make_pictures.py [--out docs/pictures] [--bonn /work/shared/data/bonn_crowd_dev]
+    PYTHONPATH=. python docs/make_pictures.py [--out docs/pictures] [--bonn ../shared/data/bonn_crowd_dev]
 
 1. The service (`vtdslam serve`: api, worker, viewer) on free ports and a temp data dir, as the browser tests
    start it (tests/e2e/services.py); a generated sequence (`vtdslam synth`, 60 frames, one walker) uploaded
@@ -206,7 +206,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "pictures")
     ap.add_argument("--bonn", type=Path,
-                    default=Path(os.environ.get("VTD_SHARED_DIR", "/work/shared")) / "data" / "bonn_crowd_dev")
+                    default=Path(os.environ.get("VTD_SHARED_DIR", ROOT.parent / "shared")) / "data" / "bonn_crowd_dev")
     ap.add_argument("--skip-service", action="store_true", help="Only the pictures of the Bonn run.")
     ap.add_argument("--skip-bonn", action="store_true", help="Only the pictures of the service.")
     args = ap.parse_args()

@@ -12,7 +12,8 @@ import pytest
 from formats import artifacts
 
 ROOT = Path(__file__).resolve().parents[2]
-TRAJECTORIES = Path(os.environ.get("VTD_SHARED_DIR", "/work/shared")) / "data" / "trajectories" / "tum_fr1_xyz"
+SHARED = Path(os.environ.get("VTD_SHARED_DIR", Path(__file__).resolve().parents[3] / "shared"))  # ../shared
+TRAJECTORIES = SHARED / "data" / "trajectories" / "tum_fr1_xyz"
 
 
 @pytest.mark.skipif(not (TRAJECTORIES / "groundtruth.txt").is_file(), reason="shared TUM trajectories absent")
