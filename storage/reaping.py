@@ -3,7 +3,7 @@ restarted, see ``worker.reaping``), then their partial files removed and the req
 again (failed when the queue refuses). Shared by every worker's reaper and the api's reads, so a job whose
 worker died shows failed (or requeued) after ``Settings.heartbeat_timeout_s`` even when no worker is alive.
 
-The queries (``storage.repositories.jobs.reap_stale``, ``reap_orphaned``) decide which jobs; this module only
+The queries (``storage.repositories.job_reaping.reap_stale``, ``reap_orphaned``) decide which jobs; this module only
 does what follows, once per reaped job (the conditional UPDATEs hand each job to one reaper).
 """
 
@@ -16,8 +16,8 @@ from sqlalchemy.orm import Session
 
 from storage.artifacts import ArtifactStore
 from storage.models import JobStatus
-from storage.repositories import jobs
-from storage.repositories.jobs import Reaped
+from storage.repositories import job_reaping, jobs
+from storage.repositories.job_reaping import Reaped
 
 log = logging.getLogger("storage.reaping")
 
@@ -28,9 +28,9 @@ def reap_stale_jobs(session: Session, store: ArtifactStore, *, timeout_s: float,
                     enqueue: Enqueue | None) -> Reaped:
     """Requeue or fail the running jobs whose worker has not reported for ``timeout_s``, and settle them.
     A read first: nothing is written while every running job is alive."""
-    if not jobs.any_stale(session, older_than_s=timeout_s):
+    if not job_reaping.any_stale(session, older_than_s=timeout_s):
         return Reaped()
-    reaped = jobs.reap_stale(session, older_than_s=timeout_s, requeue_limit=requeue_limit)
+    reaped = job_reaping.reap_stale(session, older_than_s=timeout_s, requeue_limit=requeue_limit)
     settle(session, store, reaped, f"had no sign of its worker for {timeout_s:g} s", enqueue)
     return reaped
 

@@ -1,5 +1,5 @@
 """Jobs of dead workers: requeued (up to ``Settings.requeue_orphans`` times, and at most once: a job whose
-worker died twice is a poison job and failed, see ``storage.repositories.jobs.POISON_DEATHS``) or failed,
+worker died twice is a poison job and failed, see ``storage.repositories.job_reaping.POISON_DEATHS``) or failed,
 files removed.
 
 Two ways to find them: on start a worker takes the jobs still running under its own name (its previous
@@ -17,8 +17,8 @@ import threading
 from collections.abc import Callable
 
 from storage.reaping import reap_stale_jobs, settle
-from storage.repositories import jobs
-from storage.repositories.jobs import Reaped
+from storage.repositories import job_reaping
+from storage.repositories.job_reaping import Reaped
 from worker.tasks import WorkerContext
 
 log = logging.getLogger("worker.reaping")
@@ -27,7 +27,7 @@ log = logging.getLogger("worker.reaping")
 def reap_orphans(ctx: WorkerContext) -> Reaped:
     """Jobs this worker name left running when its process died."""
     with ctx.session_factory() as session:
-        reaped = jobs.reap_orphaned(
+        reaped = job_reaping.reap_orphaned(
             session,
             worker=ctx.name,
             error=f"the worker ({ctx.name}) stopped before the job finished; retry it",

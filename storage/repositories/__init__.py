@@ -4,6 +4,6 @@ Every write commits its own transaction (rolled back on error) and returns fresh
 the list functions always re-read rows, so a long-lived session never serves stale progress.
 """
 
-from storage.repositories import batches, jobs, metrics, sequences
+from storage.repositories import batches, job_reaping, jobs, metrics, sequences
 
-__all__ = ["batches", "jobs", "metrics", "sequences"]
+__all__ = ["batches", "job_reaping", "jobs", "metrics", "sequences"]

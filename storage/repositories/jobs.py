@@ -1,15 +1,13 @@
 """Jobs and their state machine.
 
 queued → running (claim) → succeeded | failed | cancelled (finish); queued → cancelled (request_cancel);
-failed | cancelled → queued (retry); running → queued | failed (reaped: its worker died; a job whose
-worker died :data:`POISON_DEATHS` times is failed as a poison job). Transitions are conditional UPDATEs
-checked by rowcount, so two workers or a worker and the api racing on one job can never both win.
+failed | cancelled → queued (retry); running → queued | failed (reaped: its worker died, see
+:mod:`storage.repositories.job_reaping`). Transitions are conditional UPDATEs checked by rowcount, so two
+workers or a worker and the api racing on one job can never both win.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from datetime import timedelta
 from typing import Any, cast
 
 from sqlalchemy import ColumnElement, func, select, update
@@ -298,11 +296,7 @@ def finish(
     return job
 
 
-REQUEUED_STAGE = "requeued: its worker died"
-"""The stage a requeued job shows until a worker starts it again."""
-
-# A job back in the queue looks like a new one (attempts aside).
-_FRESH: dict[str, Any] = {
+FRESH: dict[str, Any] = {
     "progress": 0.0,
     "stage": "",
     "frames_done": 0,
@@ -314,6 +308,7 @@ _FRESH: dict[str, Any] = {
     "finished_at": None,
     "worker": None,
 }
+"""The values that make a job back in the queue look like a new one (attempts aside): a retry's and a requeue's."""
 
 
 def retry(session: Session, job_id: str) -> Job:
@@ -329,11 +324,11 @@ def retry(session: Session, job_id: str) -> Job:
             status=JobStatus.QUEUED,
             attempts=Job.attempts + 1,
             requeues=0,  # a manual retry is a fresh start with a fresh budget of automatic requeues
-            **_FRESH,
+            **FRESH,
             cancel_requested=False,
         )
         if done:
-            _drop_results(session, [job_id])
+            drop_results(session, [job_id])
     job = get(session, job_id)
     if not done:
         raise Conflict(
@@ -343,121 +338,13 @@ def retry(session: Session, job_id: str) -> Job:
     return job
 
 
-POISON_DEATHS = 2
-"""A job whose worker process died this many times in a row (automatic requeues) is a poison job: it is
-failed and never handed to another worker (one setting could kill every worker); only a manual retry
-queues it again."""
-POISON_ERROR = (
-    "poison job: its worker process died {deaths} times while running it (a setting or input that crashes "
-    "the pipeline?); it is not handed to another worker, retry it explicitly after a fix"
-)
-
-
-@dataclass
-class Reaped:
-    """What reaping did to the running jobs of dead workers."""
-
-    failed: list[str] = field(default_factory=list)
-    """Includes the ``poisoned`` ones."""
-    poisoned: list[str] = field(default_factory=list)
-    requeued: list[str] = field(default_factory=list)
-    """Back to queued (attempts + 1): the caller must put them on the queue again."""
-
-    @property
-    def all(self) -> list[str]:
-        return [*self.requeued, *self.failed]
-
-
-def _reap(session: Session, conds: list[ColumnElement[bool]], error: str, requeue_limit: int) -> Reaped:
-    """Requeue (up to ``requeue_limit`` times per job, and never a poison job) or fail the running jobs
-    matching ``conds``.
-
-    Both are conditional UPDATEs on ``status = running`` in one transaction, so two reapers racing
-    (every worker runs one) requeue or fail each job once.
-    """
-    running = [Job.status == JobStatus.RUNNING, *conds]
-    reaped = Reaped()
-    requeue_limit = min(requeue_limit, POISON_DEATHS - 1)
-    with writing(session):
-        if requeue_limit > 0:
-            stmt = (
-                update(Job)
-                .where(*running, Job.requeues < requeue_limit, Job.cancel_requested.is_(False))
-                .values(status=JobStatus.QUEUED, attempts=Job.attempts + 1, requeues=Job.requeues + 1,
-                        **{**_FRESH, "stage": REQUEUED_STAGE})
-                .returning(Job.id)
-                .execution_options(synchronize_session=False)
-            )
-            reaped.requeued = list(session.scalars(stmt))
-            if reaped.requeued:  # a worker killed while saving may have stored some
-                _drop_results(session, reaped.requeued)
-        stmt = (  # this death follows automatic requeues after earlier ones: a poison job
-            update(Job)
-            .where(*running, Job.requeues >= POISON_DEATHS - 1, Job.cancel_requested.is_(False))
-            .values(status=JobStatus.FAILED, finished_at=utcnow(),  # stage: the step it died in
-                    error=POISON_ERROR.format(deaths=POISON_DEATHS))
-            .returning(Job.id)
-            .execution_options(synchronize_session=False)
-        )
-        reaped.poisoned = list(session.scalars(stmt))
-        stmt = (
-            update(Job)
-            .where(*running)
-            .values(status=JobStatus.FAILED, finished_at=utcnow(), error=error)  # stage: the step it died in
-            .returning(Job.id)
-            .execution_options(synchronize_session=False)
-        )
-        reaped.failed = [*reaped.poisoned, *session.scalars(stmt)]
-        if reaped.failed:  # a failed job never shows the half of a result
-            _drop_results(session, reaped.failed)
-    return reaped
-
-
-def reap_orphaned(
-    session: Session,
-    *,
-    worker: str | None = None,
-    error: str = "the worker stopped before the job finished",
-    requeue_limit: int = 0,
-) -> Reaped:
-    """Requeue or fail jobs left running by a worker that died; call it when a worker starts.
-
-    ``worker`` limits it to jobs claimed under that name; None takes every running job (right for the
-    single-machine default, where one worker runs).
-    """
-    conds = [] if worker is None else [Job.worker == worker]
-    return _reap(session, conds, error, requeue_limit)
-
-
-def reap_stale(
-    session: Session,
-    *,
-    older_than_s: float,
-    error: str = "the worker stopped reporting (died or lost its connection); retry the job",
-    requeue_limit: int = 0,
-) -> Reaped:
-    """Requeue or fail running jobs whose worker has not reported for ``older_than_s`` seconds."""
-    return _reap(session, [_silent_for(older_than_s)], error, requeue_limit)
-
-
-def any_stale(session: Session, *, older_than_s: float) -> bool:
-    """Whether :func:`reap_stale` would take a job: one read, so readers (the api) check before writing."""
-    stmt = select(Job.id).where(Job.status == JobStatus.RUNNING, _silent_for(older_than_s)).limit(1)
-    return session.scalar(stmt) is not None
-
-
-def _silent_for(seconds: float) -> ColumnElement[bool]:
-    """The job's last sign of life (heartbeat, else its start) is older than ``seconds``."""
-    return func.coalesce(Job.heartbeat_at, Job.started_at) < utcnow() - timedelta(seconds=seconds)
-
-
 def discard_results(session: Session, job_id: str) -> None:
     """Drop a job's stored metrics and frame stats (a save that failed half-way)."""
     with writing(session):
-        _drop_results(session, [job_id])
+        drop_results(session, [job_id])
 
 
-def _drop_results(session: Session, job_ids: list[str]) -> None:
+def drop_results(session: Session, job_ids: list[str]) -> None:
     """Delete the metrics and frame stats of ``job_ids`` inside the caller's transaction."""
     session.execute(sql_delete(RunMetrics).where(RunMetrics.job_id.in_(job_ids)))
     session.execute(sql_delete(FrameStat).where(FrameStat.job_id.in_(job_ids)))

@@ -13,7 +13,7 @@ from formats.artifacts import PIPELINE_OUTPUTS
 from formats.frame_stats import FrameStats
 from storage.errors import ConfigurationError
 from storage.models import JobStatus, RunMetrics
-from storage.repositories import jobs, metrics, sequences
+from storage.repositories import job_reaping, jobs, metrics, sequences
 from storage.settings import Settings, get_settings
 from worker.consumer import build_context
 from worker.identity import claim_name
@@ -94,7 +94,7 @@ def test_dead_workers_job_is_failed_or_requeued_with_its_files_removed(tmp_path:
         assert s.get(RunMetrics, job_id) is None  # no half metrics row
     if requeue:
         assert (got.status, got.attempts, got.requeues, got.worker, got.error) == (JobStatus.QUEUED, 2, 1, None, None)
-        assert got.stage == jobs.REQUEUED_STAGE and got.progress == 0.0 and got.started_at is None
+        assert got.stage == job_reaping.REQUEUED_STAGE and got.progress == 0.0 and got.started_at is None
         assert queue == [job_id]
         # the next death of the same job fails it: one requeue only
         _dead_worker_job(ctx, job_id, "w1")
@@ -125,7 +125,7 @@ def test_a_reaped_zombie_stores_nothing_and_does_not_touch_the_new_attempt(setti
 
     def reaped_and_reclaimed() -> None:  # its outputs are written: only saving is left
         with ctx.session_factory() as s:  # the reaper's database step (its file cleanup may come later)
-            assert jobs.reap_stale(s, older_than_s=-1.0, requeue_limit=1).requeued == [job_id]
+            assert job_reaping.reap_stale(s, older_than_s=-1.0, requeue_limit=1).requeued == [job_id]
             assert jobs.claim(s, job_id, "other")
 
     ctx.pipeline = Pipeline(before_return=reaped_and_reclaimed)
@@ -143,7 +143,7 @@ def test_a_reaped_zombie_leaves_a_failed_job_failed_and_empty(settings: Settings
 
     def reaped() -> None:
         with ctx.session_factory() as s:
-            assert jobs.reap_stale(s, older_than_s=-1.0).failed == [job_id]
+            assert job_reaping.reap_stale(s, older_than_s=-1.0).failed == [job_id]
 
     ctx.pipeline = Pipeline(before_return=reaped)
     execute_job(ctx, job_id)

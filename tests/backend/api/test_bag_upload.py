@@ -84,12 +84,12 @@ def test_bag_past_the_file_limit_is_413(client, settings, tmp_path):
 
 
 def test_full_disk_while_converting_is_507(client, settings, tmp_path, monkeypatch):
-    from storage.ingest import bag as bag_module
+    from storage.ingest.bag import writer as bag_writer
 
     def full(*_args: object) -> None:
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(bag_module, "_write", full)
+    monkeypatch.setattr(bag_writer, "_write", full)
     r = upload(client, write_bag(tmp_path / "rec.bag", BagSpec(kind="ros1")).read_bytes(), filename="rec.bag")
     assert r.status_code == 507, r.text
     assert r.json()["error"]["code"] == "insufficient_storage"

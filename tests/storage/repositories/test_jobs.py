@@ -7,7 +7,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from storage.errors import Conflict, InvalidInput, NotFound
 from storage.models import Job, JobStatus, Sequence
-from storage.repositories import jobs, metrics
+from storage.repositories import job_reaping, jobs, metrics
 
 
 @pytest.fixture
@@ -202,14 +202,14 @@ def test_reap_orphaned_without_requeues_fails(session: Session, seq: Sequence) -
     assert jobs.claim(session, a.id, "host1-1") and jobs.claim(session, b.id, "host2-1")
     assert jobs.claim(session, c.id, "host1-1")
     jobs.finish(session, c.id, "succeeded")
-    assert jobs.reap_orphaned(session, worker="host1-1").failed == [a.id]
+    assert job_reaping.reap_orphaned(session, worker="host1-1").failed == [a.id]
     got = jobs.get(session, a.id)
     assert (got.status, got.error) == (JobStatus.FAILED, "the worker stopped before the job finished")
     assert got.stage == ""  # it died before its first step: no step to name
     jobs.update_progress(session, b.id, stage="dense")
-    assert jobs.reap_orphaned(session).failed == [b.id]
+    assert job_reaping.reap_orphaned(session).failed == [b.id]
     assert jobs.get(session, b.id).stage == "dense"  # the step its worker died in
-    assert jobs.reap_orphaned(session).failed == []
+    assert job_reaping.reap_orphaned(session).failed == []
     assert jobs.get(session, c.id).status == JobStatus.SUCCEEDED
     assert jobs.get(session, queued.id).status == JobStatus.QUEUED
     assert (jobs.retry(session, a.id).status, jobs.get(session, a.id).stage) == (JobStatus.QUEUED, "")
@@ -258,21 +258,21 @@ def test_reap_stale_uses_the_heartbeat(session: Session, seq: Sequence) -> None:
     assert jobs.get(session, dead.id).heartbeat_at is not None
     time.sleep(1.2)
     jobs.update_progress(session, alive.id, frames_done=3)  # w1 reports, w2 has gone silent
-    assert jobs.reap_stale(session, older_than_s=1.0).failed == [dead.id]
+    assert job_reaping.reap_stale(session, older_than_s=1.0).failed == [dead.id]
     got = jobs.get(session, dead.id)
     assert got.status == JobStatus.FAILED and "stopped reporting" in (got.error or "")
     assert jobs.get(session, alive.id).status == JobStatus.RUNNING
-    assert jobs.reap_stale(session, older_than_s=1.0).failed == []
+    assert job_reaping.reap_stale(session, older_than_s=1.0).failed == []
 
 
 def test_any_stale_reads_what_reap_stale_would_take(session: Session, seq: Sequence) -> None:
     job = jobs.create(session, sequence_id=seq.id, preset="full")
-    assert not jobs.any_stale(session, older_than_s=-1.0)  # queued: never stale
+    assert not job_reaping.any_stale(session, older_than_s=-1.0)  # queued: never stale
     assert jobs.claim(session, job.id, "w1")
-    assert not jobs.any_stale(session, older_than_s=60.0)  # a fresh heartbeat
-    assert jobs.any_stale(session, older_than_s=-1.0)
-    assert jobs.reap_stale(session, older_than_s=-1.0).failed == [job.id]
-    assert not jobs.any_stale(session, older_than_s=-1.0)
+    assert not job_reaping.any_stale(session, older_than_s=60.0)  # a fresh heartbeat
+    assert job_reaping.any_stale(session, older_than_s=-1.0)
+    assert job_reaping.reap_stale(session, older_than_s=-1.0).failed == [job.id]
+    assert not job_reaping.any_stale(session, older_than_s=-1.0)
 
 
 def test_reap_requeues_up_to_the_limit_then_fails(session: Session, seq: Sequence) -> None:
@@ -281,23 +281,23 @@ def test_reap_requeues_up_to_the_limit_then_fails(session: Session, seq: Sequenc
     jobs.update_progress(session, dead.id, progress=0.5, frames_done=5, stage="tracking")
     metrics.save_run_metrics(session, dead.id, {"fps": 1.0})  # killed while saving
     jobs.request_cancel(session, cancelling.id)
-    reaped = jobs.reap_orphaned(session, worker="w1", requeue_limit=1)
+    reaped = job_reaping.reap_orphaned(session, worker="w1", requeue_limit=1)
     assert reaped.requeued == [dead.id] and reaped.failed == [cancelling.id]  # a cancel is never requeued
     got = jobs.get(session, dead.id)
     assert (got.status, got.attempts, got.requeues, got.progress, got.frames_done, got.worker) == (
         JobStatus.QUEUED, 2, 1, 0.0, 0, None)
-    assert got.stage == jobs.REQUEUED_STAGE and got.heartbeat_at is None and got.started_at is None
+    assert got.stage == job_reaping.REQUEUED_STAGE and got.heartbeat_at is None and got.started_at is None
     with pytest.raises(NotFound):
         metrics.get_run_metrics(session, dead.id)
     assert jobs.claim(session, dead.id, "w2")
-    assert jobs.reap_stale(session, older_than_s=-1.0, requeue_limit=1).failed == [dead.id]  # budget spent
+    assert job_reaping.reap_stale(session, older_than_s=-1.0, requeue_limit=1).failed == [dead.id]  # budget spent
     assert jobs.retry(session, dead.id).requeues == 0
 
 
 def test_attempt_guard_keeps_a_reaped_worker_off_the_new_attempt(session: Session, job: Job) -> None:
     assert jobs.claim(session, job.id, "old")
     assert jobs.heartbeat(session, job.id, attempt=1)
-    assert jobs.reap_orphaned(session, worker="old", requeue_limit=1).requeued == [job.id]
+    assert job_reaping.reap_orphaned(session, worker="old", requeue_limit=1).requeued == [job.id]
     assert jobs.claim(session, job.id, "new")
     assert not jobs.heartbeat(session, job.id, attempt=1)
     assert jobs.update_progress(session, job.id, frames_done=99, attempt=1)  # "stop"
