@@ -30,6 +30,15 @@ def redkitchen(shared: Path) -> Path:
     return path
 
 
+@pytest.fixture(scope="session")
+def bonn_dev(shared: Path) -> Path:
+    """bonn_crowd_dev: evaluation only (DATA.md)."""
+    path = shared / "data" / "bonn_crowd_dev"
+    if not (path / "rgb.txt").is_file():
+        pytest.skip(f"{path} not present")
+    return path
+
+
 @pytest.fixture
 def no_vtd_env(monkeypatch: pytest.MonkeyPatch) -> None:
     """A developer's or CI's VTD_* variables must not redirect tests to real data (VTD_TEST_* stay)."""

@@ -207,14 +207,6 @@ def test_limits(tmp_path):
     assert not (tmp_path / "seq").exists() and _leftovers(tmp_path) == []
 
 
-@pytest.fixture
-def bonn_dev(shared: Path) -> Path:
-    path = shared / "data" / "bonn_crowd_dev"
-    if not (path / "rgb.txt").is_file():
-        pytest.skip(f"{path} not present")
-    return path
-
-
 @pytest.mark.realdata
 @pytest.mark.parametrize("depth_enc", ["32FC1", "16UC1"])
 def test_real_frames_round_trip_exactly(tmp_path, bonn_dev, depth_enc):

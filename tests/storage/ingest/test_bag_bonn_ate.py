@@ -14,14 +14,6 @@ from tests.storage.ingest.rosbags_write import folder_to_bag
 FRAMES = 120  # the empty office and the first people walking in (they enter near frame 80)
 
 
-@pytest.fixture(scope="module")
-def bonn_dev(shared: Path) -> Path:
-    path = shared / "data" / "bonn_crowd_dev"
-    if not (path / "rgb.txt").is_file():
-        pytest.skip(f"{path} not present")
-    return path
-
-
 def _run(root: Path):
     from worker.slam.camera import camera_from_preset
     from worker.slam.io.sequence import Sequence

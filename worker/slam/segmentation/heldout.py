@@ -7,7 +7,10 @@ Sets, all from ../shared and none ever trained on by the `cpu-real` recipe:
 - `tum-walking-xyz`: the one walking_xyz frame with its hand-made mask;
 - `bonn-crowd`: every n-th bonn_crowd_dev frame against teacher-made references (`reference_masks`);
 - `7scenes-empty`: people-free 7-Scenes frames 900-999 (held out of `cpu-real`'s backgrounds): only the share
-  of pixels marked person is defined there.
+  of pixels marked person is defined there;
+- `davis-movers`: davis_movers_dev (evaluation only), every frame of its seven clips against the mover's mask
+  (cars, riders and their vehicles, a kite-surfer ...): does the potentially-dynamic mask see movers that are not
+  only people. Skipped when the folder is absent.
 """
 from __future__ import annotations
 
@@ -101,7 +104,18 @@ def build_sets(shared: Path, cache_dir: Path, bonn_every: int = 10) -> list[Held
         HeldOutSet("bonn-crowd", tuple(EvalImage(f, _png(r, lambda m: m)) for f, r in zip(bonn, refs)),
                    f"every {bonn_every}th frame, references: {Path(BONN_TEACHER).stem} at 513, 3 px ignore band"),
         HeldOutSet("7scenes-empty", tuple(EvalImage(f, None) for f in empty), "people-free frames 900-999"),
+        *_davis(shared),
     ]
+
+
+def _davis(shared: Path) -> list[HeldOutSet]:
+    """davis_movers_dev as one set (its masks: 255 the moving object), or none when it is absent."""
+    frames = sorted((shared / "data" / "davis_movers_dev").glob("*/images/*.jpg"))
+    if not frames:
+        return []
+    items = tuple(EvalImage(f, _png(f.parent.parent / "masks" / f"{f.stem}.png", lambda m: (m > 127).astype(np.uint8)))
+                  for f in frames)
+    return [HeldOutSet("davis-movers", items, f"{len(frames)} frames of 7 clips, the mover's mask (evaluation only)")]
 
 
 def score_set(segmenter: Segmenter, held: HeldOutSet) -> PersonScores:

@@ -17,11 +17,11 @@ import numpy as np
 from worker.slam.config import FeatureConfig
 from worker.slam.features.orb import OrbExtractor
 from worker.slam.features.vocabulary import Vocabulary
+from worker.slam.io.evaluation_only import is_evaluation_only
 from worker.slam.vocab_train.tree import build_tree, vocabulary_from_tree
 
 log = logging.getLogger(__name__)
 
-EVALUATION_ONLY = ("bonn_crowd_dev", "davis_movers_dev")
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 
 
@@ -55,7 +55,7 @@ def image_paths(folders: list[Path], every: int = 1) -> list[Path]:
     """Colour images under `folders` (recursive, sorted; depth maps skipped), every `every`-th of each folder."""
     out: list[Path] = []
     for folder in folders:
-        if any(name in str(folder.resolve()) for name in EVALUATION_ONLY):
+        if is_evaluation_only(folder):
             raise ValueError(f"{folder} is evaluation-only data (DATA.md): never train on it")
         if not folder.is_dir():
             raise FileNotFoundError(f"no such folder: {folder}")

@@ -63,7 +63,7 @@ class TrainConfig:
     soft label alone trains them."""
     forbidden: tuple[str, ...] = ("{shared}/data/tum_frames/fr3_walking_xyz",)
     """Folders (or globs of files) that must never feed training, validation or BN statistics (test frames); a
-    config whose data reaches into them is rejected. `data.ALWAYS_FORBIDDEN` (bonn_crowd_dev) is added to it
+    config whose data reaches into them is rejected. `data.ALWAYS_FORBIDDEN` (the evaluation-only sets) is added to it
     whatever a config says."""
     bn_extra_frames: tuple[str, ...] = ()
     """Extra globs added to the AdaBN frames (e.g. the target frames). The trainer validates the EMA weights

@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from worker.slam.errors import ConfigError
+from worker.slam.io.evaluation_only import EVALUATION_ONLY
 from worker.slam.io.images import read_rgb
 from worker.slam.segmentation.train.augment import Cutout, extract_cutouts
 from worker.slam.segmentation.train.config import TrainConfig
@@ -26,9 +27,9 @@ from worker.slam.segmentation.train.datasets import (
 from worker.slam.segmentation.train.mixture import MixtureDataset, SoftSet
 from worker.slam.segmentation.train.teacher_cache import ensemble_soft_labels
 
-#: Never trained on, whatever a config says: bonn_crowd_dev stands for footage the product has never seen
-#: (evaluation only: no training, fine-tuning, checkpoint selection or BN statistics on its frames).
-ALWAYS_FORBIDDEN = ("{shared}/data/bonn_crowd_dev",)
+#: Never trained on, whatever a config says: the evaluation-only sets stand for footage the product has never seen
+#: (no training, fine-tuning, checkpoint selection or BN statistics on their frames).
+ALWAYS_FORBIDDEN = tuple(f"{{shared}}/data/{name}" for name in EVALUATION_ONLY)
 
 
 @dataclass(frozen=True)
