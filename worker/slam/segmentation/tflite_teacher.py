@@ -1,8 +1,9 @@
 """The `tflite-teacher` backend: a user-supplied TFLite segmenter run with ai-edge-litert (imported here only).
 
 Understood model families, told apart by their output tensor:
-- (1, h, w, 21) float: DeepLabV3 PASCAL-VOC logits -> background / person (VOC 15) / chair (VOC 9);
-- (1, h, w) integer: a VOC class map (the quantised DeepLabV3) -> same mapping, one-hot probabilities;
+- (1, h, w, 21) float: DeepLabV3 PASCAL-VOC logits -> background / person (VOC 15) / chair (VOC 9), or all 21
+  VOC classes with `full_voc` (a multi-class MSNET's teacher);
+- (1, h, w) integer: a VOC class map (the quantised DeepLabV3) -> same classes, one-hot probabilities;
 - (1, h, w, 1) float: a person probability (MediaPipe selfie segmentation) -> background / person.
 """
 from __future__ import annotations
@@ -13,6 +14,7 @@ import cv2
 import numpy as np
 
 from worker.slam.segmentation.base import SegmentationError, SegmentationResult, SegmenterConfig, check_rgb, labels_of
+from worker.slam.segmentation.classes import DEFAULT_DYNAMIC, VOC_CLASSES as VOC_NAMES
 
 VOC_CLASSES = 21
 # Our class -> PASCAL VOC index. Everything else in VOC counts as background.
@@ -22,7 +24,8 @@ VOC_TO_OURS = {"person": 15, "chair": 9}
 class TfliteSegmenter:
     """Wraps one .tflite model; `predict_probs` gives probabilities over `classes` at the model's output size."""
 
-    def __init__(self, model_path: Path, threads: int = 1, dynamic_classes: tuple[str, ...] | None = None) -> None:
+    def __init__(self, model_path: Path, threads: int = 1, dynamic_classes: tuple[str, ...] | None = None,
+                 full_voc: bool = False) -> None:
         from ai_edge_litert.interpreter import Interpreter
 
         try:
@@ -44,9 +47,10 @@ class TfliteSegmenter:
             self.kind = "person-prob"
         else:
             raise SegmentationError(f"unsupported TFLite output shape {shape} in {model_path}")
+        self.full_voc = full_voc and self.kind != "person-prob"
         self.classes: tuple[str, ...] = ("background", "person") if self.kind == "person-prob" else \
-            ("background", "person", "chair")
-        default_dyn = tuple(c for c in ("person", "chair") if c in self.classes)
+            VOC_NAMES if self.full_voc else ("background", "person", "chair")
+        default_dyn = DEFAULT_DYNAMIC if self.full_voc else tuple(c for c in ("person", "chair") if c in self.classes)
         self.dynamic_classes = tuple(dynamic_classes) if dynamic_classes is not None else default_dyn
         self.name = Path(model_path).stem
 
@@ -81,6 +85,8 @@ class TfliteSegmenter:
             z = out.astype(np.float32)
             z = np.exp(z - z.max(-1, keepdims=True))
             voc = z / z.sum(-1, keepdims=True)
+        if self.full_voc:
+            return voc
         person, chair = voc[..., VOC_TO_OURS["person"]], voc[..., VOC_TO_OURS["chair"]]
         return np.stack([1.0 - person - chair, person, chair], axis=-1)
 

@@ -11,14 +11,16 @@ from tqdm import tqdm
 
 from worker.slam.errors import ConfigError
 from worker.slam.io.images import read_rgb
+from worker.slam.segmentation.classes import VOC_CLASSES
 
 
-def cache_key(teacher: Path, images: list[Path], grid: tuple[int, int] | None = None) -> str:
+def cache_key(teacher: Path, images: list[Path], grid: tuple[int, int] | None = None, num_classes: int = 3) -> str:
     h = hashlib.sha1(str(teacher.resolve()).encode())
     for p in images:
         h.update(str(p.resolve()).encode())
     size = "" if grid is None else f"-{grid[0]}x{grid[1]}"
-    return f"{teacher.stem}-{len(images)}{size}-{h.hexdigest()[:12]}"
+    k = "" if num_classes == 3 else f"-k{num_classes}"  # the 3-class caches of earlier runs keep their names
+    return f"{teacher.stem}-{len(images)}{size}{k}-{h.hexdigest()[:12]}"
 
 
 def soft_labels(teacher: Path, images: list[Path], classes: tuple[str, ...], cache_dir: Path,
@@ -29,12 +31,13 @@ def soft_labels(teacher: Path, images: list[Path], classes: tuple[str, ...], cac
     Teacher classes missing from `classes` are an error; our classes the teacher lacks get probability 0.
     """
     cache_dir.mkdir(parents=True, exist_ok=True)
-    path = cache_dir / f"{cache_key(teacher, images, grid)}.npy"
+    path = cache_dir / f"{cache_key(teacher, images, grid, len(classes))}.npy"
     if path.is_file():
         return np.load(path, mmap_mode="r")
     from worker.slam.segmentation.tflite_teacher import TfliteSegmenter
 
-    seg = TfliteSegmenter(teacher, threads=threads)
+    # All 21 VOC classes when the model learns them all; else the teacher's person / chair view.
+    seg = TfliteSegmenter(teacher, threads=threads, full_voc=set(VOC_CLASSES) <= set(classes))
     missing = set(seg.classes) - set(classes)
     if missing:
         raise ConfigError(f"teacher {teacher.name} predicts classes the model lacks: {sorted(missing)}")
