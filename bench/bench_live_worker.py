@@ -57,11 +57,13 @@ def main() -> None:
     tmp = Path(tempfile.mkdtemp(prefix="bench-live-worker-"))
     spool = LiveSpool(tmp / "seq")
     spool.create()
-    ready, marks = threading.Event(), {}
+    ready = threading.Event()
+    marks: dict[str, dict[str, float]] = {}
+    loads: dict[str, float] = {}
 
     def feed() -> None:
         ready.wait()
-        marks["start"], marks["load_start"] = _cpu_by_thread(), os.getloadavg()[0]
+        marks["start"], loads["start"] = _cpu_by_thread(), os.getloadavg()[0]
         t0 = time.monotonic()
         for i, (t, rgb, depth, ext) in enumerate(data):
             time.sleep(max(0.0, t0 + i / args.rate - time.monotonic()))
@@ -70,7 +72,7 @@ def main() -> None:
             (spool.folder / f"depth/{name}.png").write_bytes(depth)
             spool.append(SpooledFrame(i, t, round(time.time(), 6), f"rgb/{name}{ext}", f"depth/{name}.png"))
         time.sleep(0.3)  # the last frames run
-        marks["end"], marks["load_end"] = _cpu_by_thread(), os.getloadavg()[0]
+        marks["end"], loads["end"] = _cpu_by_thread(), os.getloadavg()[0]
         if src.groundtruth:
             (spool.folder / "groundtruth.txt").write_text(src.groundtruth)
         spool.end("client ended the stream", len(data))
@@ -100,7 +102,7 @@ def main() -> None:
         ("CPU ms per frame run, by thread", ", ".join(f"{k} {v:.1f}" for k, v in sorted(per.items(),
                                                                                           key=lambda kv: -kv[1]))),
         ("snapshots on the pipeline thread (ms per frame)", f"{1000 * writer.spent_s / max(1, writer.frames):.2f}"),
-        ("load average, start -> end of the stream", f"{marks['load_start']:.1f} -> {marks['load_end']:.1f}"),
+        ("load average, start -> end of the stream", f"{loads['start']:.1f} -> {loads['end']:.1f}"),
     ]
     width = max(len(k) for k, _ in rows)
     for k, v in rows:
