@@ -147,3 +147,21 @@ def test_the_cli_fails_with_a_message_when_no_camera_answers(tmp_path) -> None:
     bad = CliRunner().invoke(app, ["stream", "camera:x", "--to", "http://127.0.0.1:9"])
     assert isinstance(bad.exception, InvalidInput) and "camera:INDEX" in str(bad.exception)
     assert camera_index("camera:3") == 3 and camera_index(str(tmp_path)) is None
+
+
+def test_ctrl_c_ends_the_stream_and_keeps_what_was_sent(server) -> None:
+    from cli.stream.client import create_session, send_frames
+
+    base, _ = server
+    cam = open_rgbd_camera(0, _opener(lambda api: FakeCapture(frames=50), []))
+
+    def interrupted():
+        for k, frame in enumerate(cam.frames()):
+            if k == 3:
+                raise KeyboardInterrupt
+            yield frame
+
+    session = create_session(base, None, cam.camera_spec() or {}, "orb-only")
+    report = send_frames(base, session, interrupted())
+    assert report.sent == 3 and report.ended is not None
+    assert report.ended["type"] == "ended" and report.ended["frames"] == 3
