@@ -15,15 +15,10 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from formats.class_names import VOC_CLASSES
+
 MOVING_OUTLINE = (255, 32, 32)
 """RGB of the outline :func:`class_overlay` draws around the pixels judged moving."""
-
-#: PASCAL VOC's classes in palette order (the teacher's and MSNET's index order; index 0 = background).
-VOC_ORDER: tuple[str, ...] = (
-    "background", "aeroplane", "bicycle", "bird", "boat", "bottle", "bus", "car", "cat", "chair", "cow",
-    "diningtable", "dog", "horse", "motorbike", "person", "pottedplant", "sheep", "sofa", "train", "tvmonitor",
-)
-
 
 def voc_palette_colour(index: int) -> tuple[int, int, int]:
     """The ``index``-th colour (0..255) of PASCAL VOC's palette: the index's bits spread over R, G, B from the
@@ -41,9 +36,9 @@ def voc_palette_colour(index: int) -> tuple[int, int, int]:
 def class_colour(name: str) -> tuple[int, int, int]:
     """(r, g, b) uint8 values of class ``name``: VOC's own colour for a VOC class, else a stable palette colour
     past VOC's (by CRC-32 of the name)."""
-    if name in VOC_ORDER:
-        return voc_palette_colour(VOC_ORDER.index(name))
-    return voc_palette_colour(len(VOC_ORDER) + zlib.crc32(name.encode()) % (256 - len(VOC_ORDER)))
+    if name in VOC_CLASSES:
+        return voc_palette_colour(VOC_CLASSES.index(name))
+    return voc_palette_colour(len(VOC_CLASSES) + zlib.crc32(name.encode()) % (256 - len(VOC_CLASSES)))
 
 
 def hex_colour(name: str) -> str:

@@ -2,7 +2,8 @@
 
 A setting's spec is what ``formats/settings_ranges.json`` publishes (generated from the config dataclasses by
 ``worker.slam.ranges``): its ``type`` (``bool``, ``int``, ``float``, ``str``; others are not checked here),
-or for a list of names the ``choices`` its items may take, optionally a valid range ``min..max`` (inclusive) and a ``below``/``at_most`` partner that bounds it from above.
+or for a list of names the ``choices`` its items may take, optionally a valid range ``min..max`` (inclusive)
+and a ``below``/``at_most`` partner that bounds it from above.
 The api checks a job's config against the published specs with :func:`check_config`; the worker checks each
 override of its dataclasses with :func:`check_setting` and :func:`check_pair`. Both raise
 :class:`formats.errors.SpecError` naming the field, which each side turns into its own error class.

@@ -6,8 +6,9 @@ every frame it rewrites ``partial.json`` (the latest frames' index, timestamp, a
 small file, how a live session's pose reaches the page); every ``interval_s`` it writes the trajectory and the
 keyframes so far (TUM), the map so far (each keyframe's points back-projected once from its dense copy and moved
 to the keyframe's current pose; the sparse map's points when the run keeps no dense copies) and the frame with
-its masks, coloured by segmentation class (the classes and their colours in partial.json's `frame_legend`): gathered on the pipeline thread, written on a writer thread. The files are removed when the job ends
-(its final artifacts replace them).
+its masks, coloured by segmentation class (the classes and their colours in partial.json's `frame_legend`):
+gathered on the pipeline thread, written on a writer thread. The files are removed when the job ends (its final
+artifacts replace them).
 """
 from __future__ import annotations
 

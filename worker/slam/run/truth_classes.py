@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from formats.class_names import COCO_CLASSES
 from worker.slam.errors import SequenceFormatError
-from worker.slam.segmentation.classes import COCO_CLASSES
 from worker.slam.truth import Truth
 
 

@@ -39,18 +39,18 @@ class TruthObserver:
         self.seen_frames += 1
         if index >= len(self.truth):
             return
-        extracted, culled = inputs.extracted, inputs.culled
-        compared = culled is not None and extracted is not None and inputs.dynamic_mask is not None
-        if compared:
-            self.scores.add_mask(index, inputs.dynamic_mask)
+        extracted, culled, moving = inputs.extracted, inputs.culled, inputs.dynamic_mask
+        compared = culled is not None and extracted is not None and moving is not None
+        if culled is not None and extracted is not None and moving is not None:
+            self.scores.add_mask(index, moving)
             self.scores.add_features(index, extracted.uv[culled], extracted.uv[~culled],
                                      marked=inputs.potentially_dynamic)
         if inputs.potentially_dynamic is not None or compared:
             masks = self.classes.masks(index)
             if inputs.potentially_dynamic is not None:
                 self.marked.add(masks, inputs.potentially_dynamic)
-            if compared and inputs.dynamic_mask is not None:
-                self.culled.add(masks, inputs.dynamic_mask)
+            if compared and moving is not None:
+                self.culled.add(masks, moving)
         self.restored(index, inputs, inputs.dynamic_mask)
 
     def restored(self, index: int, inputs: FrameInputs, hole: np.ndarray | None) -> None:

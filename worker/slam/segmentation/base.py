@@ -16,8 +16,9 @@ import numpy as np
 from numba import njit
 
 from worker.slam.config import valid
-from worker.slam.segmentation.classes import DYNAMIC_GROUPS, DYNAMIC_NAMES, resolve_for_segmenter
 from worker.slam.errors import ConfigError, SlamError
+from worker.slam.segmentation.classes import DYNAMIC_GROUPS
+from worker.slam.segmentation.dynamic_names import DYNAMIC_NAMES, resolve_for_segmenter
 
 
 class SegmentationError(SlamError):

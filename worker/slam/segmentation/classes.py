@@ -53,29 +53,3 @@ def resolve_dynamic(names: tuple[str, ...] | list[str], classes: tuple[str, ...]
             raise ConfigError(f"unknown potentially dynamic class {name!r}",
                               detail={"groups": list(DYNAMIC_GROUPS), "classes": list(classes)})
     return tuple(c for c in classes if c in wanted and c != "background")
-
-
-#: COCO-80 class names in YOLO id order (id = index): what the augmenter's `truth/classes` images hold (id + 1).
-COCO_CLASSES: tuple[str, ...] = (
-    "person", "bicycle", "car", "motorcycle", "airplane", "bus", "train", "truck", "boat", "traffic light",
-    "fire hydrant", "stop sign", "parking meter", "bench", "bird", "cat", "dog", "horse", "sheep", "cow",
-    "elephant", "bear", "zebra", "giraffe", "backpack", "umbrella", "handbag", "tie", "suitcase", "frisbee",
-    "skis", "snowboard", "sports ball", "kite", "baseball bat", "baseball glove", "skateboard", "surfboard",
-    "tennis racket", "bottle", "wine glass", "cup", "fork", "knife", "spoon", "bowl", "banana", "apple",
-    "sandwich", "orange", "broccoli", "carrot", "hot dog", "pizza", "donut", "cake", "chair", "couch",
-    "potted plant", "bed", "dining table", "toilet", "tv", "laptop", "mouse", "remote", "keyboard", "cell phone",
-    "microwave", "oven", "toaster", "sink", "refrigerator", "book", "clock", "vase", "scissors", "teddy bear",
-    "hair drier", "toothbrush",
-)
-
-#: Every name a job may list as potentially dynamic: a group, a VOC class or a COCO class (published for the api).
-DYNAMIC_NAMES: tuple[str, ...] = tuple(dict.fromkeys((*DYNAMIC_GROUPS, *VOC_CLASSES[1:], *COCO_CLASSES)))
-
-
-def resolve_for_segmenter(names: tuple[str, ...] | list[str], classes: tuple[str, ...]) -> tuple[str, ...]:
-    """`resolve_dynamic` for a job's names: a COCO name the segmenter lacks but VOC has under its own name
-    (`motorcycle`, `couch`, `tv`) means VOC's class; any other COCO class the segmenter lacks (`teddy bear` for a
-    VOC model) is simply not covered, as a VOC class is. Unknown names are a ConfigError."""
-    wanted = [n if n in classes or n in DYNAMIC_GROUPS else COCO_TO_VOC.get(n, n) for n in names]
-    lacking = set(COCO_CLASSES) - set(VOC_CLASSES) - set(classes)
-    return resolve_dynamic([n for n in wanted if n not in lacking], classes)
