@@ -31,6 +31,12 @@ window.VTDClasses = (() => {
         el("td", { class: "muted small" }, kind)))));
   }
 
+  /** A class name, after a swatch of its colour when the run's legend has it. */
+  function named(name, list) {
+    const e = entries(list).find((x) => x.name === name);
+    return e ? [el("span", { class: "swatch", style: `background:${e.colour}` }), name] : [name];
+  }
+
   /** Per true mover class: share of its pixels segmentation marked and culling judged moving. */
   function recallTable(m) {
     const marked = (((m.segmentation || {}).truth || {}).recall_by_class) || {};
@@ -41,7 +47,8 @@ window.VTDClasses = (() => {
     return el("table", { class: "data", id: "truth-by-class" },
       el("thead", {}, el("tr", {}, el("th", {}, "True mover class"), el("th", { class: "n" }, "Marked by segmentation"),
         el("th", { class: "n" }, "Judged moving by culling"), el("th", { class: "n" }, "Pixels"))),
-      el("tbody", {}, ...names.map((n) => el("tr", {}, el("td", {}, n), cell(marked[n]), cell(culled[n]),
+      el("tbody", {}, ...names.map((n) => el("tr", {},
+        el("td", { class: "legend-name" }, ...named(n, (m.segmentation || {}).legend)), cell(marked[n]), cell(culled[n]),
         el("td", { class: "n" }, String((marked[n] || culled[n] || {}).pixels ?? "—"))))));
   }
 
