@@ -14,7 +14,8 @@ import cv2
 import numpy as np
 
 from worker.slam.segmentation.base import SegmentationError, SegmentationResult, SegmenterConfig, check_rgb, labels_of
-from worker.slam.segmentation.classes import DEFAULT_DYNAMIC, VOC_CLASSES as VOC_NAMES
+from worker.slam.segmentation.classes import DEFAULT_DYNAMIC
+from worker.slam.segmentation.classes import VOC_CLASSES as VOC_NAMES
 
 VOC_CLASSES = 21
 # Our class -> PASCAL VOC index. Everything else in VOC counts as background.
