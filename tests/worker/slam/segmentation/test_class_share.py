@@ -21,8 +21,8 @@ CLASSES = ("background", "person", "car", "sofa")
 class _Chosen:
     """A segmenter returning a chosen label map per frame (frame i: the i-th of `maps`)."""
 
-    classes = CLASSES
-    dynamic_classes = ("person", "car")
+    classes: tuple[str, ...] = CLASSES
+    dynamic_classes: tuple[str, ...] = ("person", "car")
 
     def __init__(self, maps: list[np.ndarray]) -> None:
         self.maps = maps
