@@ -3,6 +3,7 @@ classes an image holds, and the ablation switches build networks without the par
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import pytest
 import torch
@@ -59,7 +60,8 @@ def test_presence_loss_trains_the_class_head() -> None:
 
 @pytest.mark.parametrize("switch", ["pencoders", "enhancement_filters", "guidance_attention", "decoder"])
 def test_ablations_drop_their_part(switch: str) -> None:
-    full, ablated = build_msnet(TINY), build_msnet(replace(TINY, **{switch: False}))
+    flags: dict[str, Any] = {switch: False}
+    full, ablated = build_msnet(TINY), build_msnet(replace(TINY, **flags))
     gone = {k.rsplit(".", 1)[0] for k in full.state_dict()} - {k.rsplit(".", 1)[0] for k in ablated.state_dict()}
     assert gone, f"{switch}=False removed no weights"
     with torch.no_grad():
