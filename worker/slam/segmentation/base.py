@@ -106,8 +106,10 @@ class SegmenterConfig:
     """msnet: `auto` (CUDA when present, else CPU), `cpu` or `cuda`."""
     threads: int | None = None
     """CPU threads for inference; None leaves the library default (the process may share cores)."""
-    with_probs: bool = True
-    """Also return per-class probabilities at full resolution (costs a resize per class)."""
+    with_probs: bool = False
+    """Also return per-class probabilities at full resolution (a resize per class: ~20 ms a VGA frame with 21
+    classes). The pipeline needs only the labels, which msnet then upsamples from the classes that win a grid cell
+    (`msnet.segmenter.candidate_labels`)."""
     dynamic_classes: tuple[str, ...] | None = field(default=None, metadata={"choices": DYNAMIC_NAMES})
     """The potentially dynamic classes, by class name or group (`person`, `animal`, `vehicle`, `object`; see
     `segmentation.classes.DYNAMIC_GROUPS`), resolved against the backend's classes (`resolve_for_segmenter`: a
