@@ -108,7 +108,8 @@ def main() -> None:
             segmenters[name] = make_segmenter(SegmenterConfig(
                 backend="tflite-teacher", model_path=str(args.shared / "models" / file), threads=args.threads))
     voc_teacher = args.shared / "models" / TEACHERS["DeepLabV3-MNv2 257 (teacher)"]
-    if voc_teacher.is_file() and not args.no_teachers:  # all 21 VOC classes, the default potentially dynamic ones marked (issue 57)
+    # all 21 VOC classes, the default potentially dynamic ones marked (issue 57)
+    if voc_teacher.is_file() and not args.no_teachers:
         segmenters["DeepLabV3-MNv2 257 (teacher), 21 classes"] = make_segmenter(SegmenterConfig(
             backend="tflite-teacher", model_path=str(voc_teacher), threads=args.threads, full_voc=True))
 
