@@ -1,14 +1,17 @@
 """MSNET against the TFLite teachers on the real held-out person sets (issue 20), as a markdown table.
 
-    .venv/bin/python bench/bench_msnet.py [--threads 1] [--checkpoint PT] [--cache /tmp/vtd_msnet_refs]
-        [--overlays DIR] [--guided] [--bonn-every 10] [--sequence AUG_DIR ...] [--every 10] [--frames 300]
+    .venv/bin/python bench/bench_msnet.py [--threads 1] [--checkpoint PT] [--no-teachers]
+        [--cache /tmp/vtd_msnet_refs] [--overlays DIR] [--guided] [--bonn-every 10] [--sequence AUG_DIR ...]
+        [--every 10] [--frames 300]
 
 Sets (`worker/slam/segmentation/heldout.py`): COCO128 held-out, the CCP test split, the TUM walking_xyz frame,
 every 10th bonn_crowd_dev frame against reference masks made by the int8 DeepLabV3 at 513 (cached in --cache,
 outside the repo; that model's own Bonn column is therefore 1.0 by construction and measures nothing) and the
-people-free 7-Scenes frames 900-999 (share of pixels marked person). Each cell: person IoU (precision / recall),
-pixels pooled over the set. `ms` is the median `segment()` time on the 640x480 Bonn frames (resize in,
-full-resolution labels and probabilities out), all models in the same run, on --threads threads.
+people-free 7-Scenes frames 900-999 (share of pixels marked potentially dynamic), and davis_movers_dev (the
+mover against the potentially dynamic mask). Each cell: IoU (precision / recall), pixels pooled over the set.
+The 21-class teacher row is the 257 teacher with all VOC classes, its default potentially dynamic classes marked.
+`ms` is the median `segment()` time on the 640x480 Bonn frames (resize in, full-resolution labels out), all
+models in the same run, on --threads threads.
 With `--sequence` (generated sequences with truth), the pooled IoU, precision and recall of the potentially
 dynamic mask against the true masks on every n-th frame. Timings on a shared machine vary with its load: the
 load average is printed.
@@ -55,6 +58,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shared", type=Path, default=Path(os.environ.get("VTD_SHARED_DIR", "../shared")))
     ap.add_argument("--checkpoint", type=Path, default=None, help="MSNET weights (default: shipped)")
+    ap.add_argument("--no-teachers", action="store_true", help="MSNET only (e.g. comparing checkpoints)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--cache", type=Path, default=Path("/tmp/vtd_msnet_refs"),
                     help="where the Bonn reference masks are made once (never inside the repo)")
@@ -99,10 +103,15 @@ def main() -> None:
     if args.guided:
         segmenters["MSNET + guided upsampling (option)"] = make_segmenter(SegmenterConfig(
             checkpoint=ckpt, device="cpu", threads=args.threads, guided_radius=CHOSEN_RADIUS))
-    for name, file in TEACHERS.items():
+    for name, file in ({} if args.no_teachers else TEACHERS).items():
         if (args.shared / "models" / file).is_file():
             segmenters[name] = make_segmenter(SegmenterConfig(
                 backend="tflite-teacher", model_path=str(args.shared / "models" / file), threads=args.threads))
+    voc_teacher = args.shared / "models" / TEACHERS["DeepLabV3-MNv2 257 (teacher)"]
+    # all 21 VOC classes, the default potentially dynamic ones marked (issue 57)
+    if voc_teacher.is_file() and not args.no_teachers:
+        segmenters["DeepLabV3-MNv2 257 (teacher), 21 classes"] = make_segmenter(SegmenterConfig(
+            backend="tflite-teacher", model_path=str(voc_teacher), threads=args.threads, full_voc=True))
 
     rows = []
     for name, seg in segmenters.items():
@@ -126,9 +135,9 @@ def main() -> None:
         print(f"- {s.name}: {len(s.images)} images ({s.note})")
     if truth_frames:
         print(f"- sequences with truth: {len(truth_frames)} frames (every {args.every}th of the first {args.frames}"
-              f" of {', '.join(p.name for p in args.sequence)}); potentially dynamic mask (person and chair)")
+              f" of {', '.join(p.name for p in args.sequence)}); each model's potentially dynamic mask")
     print()
-    ref = next((sc["bonn-crowd"].ms_median for n, sc, _ in rows if "(teacher)" in n), None)
+    ref = next((sc["bonn-crowd"].ms_median for n, sc, _ in rows if n.endswith("(teacher)")), None)
     print("| model | " + " | ".join(s.name for s in sets) + (" | sequences" if truth_frames else "")
           + " | ms/frame 640x480 | × teacher's time |")
     print("|---|" + "---|" * (len(sets) + 2 + bool(truth_frames)))

@@ -21,9 +21,25 @@ def _shared_default() -> str:
     return os.environ.get("VTD_SHARED_DIR", "../shared")
 
 
+def render_synthetic_rooms(cfg) -> None:
+    """Render the recipe's synthetic rooms (`synth_seeds`) that its cache folder lacks: about a minute each."""
+    from worker.slam.segmentation.train.synthetic import synthetic_folder
+    from worker.slam.synth.generator import SynthConfig, generate_synthetic
+
+    shared = cfg.path("{shared}")
+    for seed in cfg.synth_seeds:
+        folder = synthetic_folder(cfg, seed)
+        if not (folder / "truth" / "truth.json").is_file():
+            typer.echo(f"rendering synthetic room {seed} into {folder}")
+            generate_synthetic(folder, SynthConfig(frames=cfg.synth_frames, people=cfg.synth_people, seed=seed,
+                                                   shared_dir=shared if shared.is_dir() else None))
+
+
 def train_command(
     config: Annotated[str, typer.Option(help="Preset (cpu-tum = the shipped recipe, cpu-real = real people at scale, "
                                              "cpu-real-mnv2 = its data on a pretrained MobileNetV2 path, "
+                                             "cpu-voc = the 21 VOC classes with class-presence queries (with "
+                                             "--init-partial a person checkpoint), "
                                              "cpu-tum-ft, cpu-real-tum-ft and cpu-real-mnv2-neg = fine-tunes "
                                              "needing --init, "
                                              "cpu, paper, smoke) or a JSON "
@@ -32,6 +48,9 @@ def train_command(
     resume: Annotated[bool, typer.Option(help="Continue from OUT/last.pt.")] = False,
     init: Annotated[Path | None, typer.Option(help="Fine-tune: start from this checkpoint's weights (e.g. the "
                                                    "msnet.pt of a cpu-tum run for cpu-tum-ft).")] = None,
+    init_partial: Annotated[Path | None, typer.Option(
+        help="Start every tensor whose name and shape match from this checkpoint (e.g. a person MSNET for a "
+             "multi-class model); the rest starts pretrained or random.")] = None,
     epochs: Annotated[int | None, typer.Option(help="Override the number of epochs.")] = None,
     batch_size: Annotated[int | None, typer.Option(help="Override the batch size.")] = None,
     lr: Annotated[float | None, typer.Option(help="Override the peak learning rate.")] = None,
@@ -53,7 +72,10 @@ def train_command(
                                  param_hint="--init")
     cfg = load_train_config(config, out_dir=str(out) if out else None, epochs=epochs, batch_size=batch_size, lr=lr,
                             samples_per_epoch=samples_per_epoch, time_budget_min=time_budget_min,
-                            init_weights=str(init) if init else None, shared_dir=shared_dir or _shared_default())
+                            init_weights=str(init) if init else None,
+                            init_partial=str(init_partial) if init_partial else None,
+                            shared_dir=shared_dir or _shared_default())
+    render_synthetic_rooms(cfg)
     weights = train(cfg, resume=resume, progress=progress)
     if export is not None:
         export.parent.mkdir(parents=True, exist_ok=True)

@@ -48,7 +48,9 @@ PARTIAL_MAP = "partial_map.ply"
 PARTIAL_FRAME_RGB = "partial_frame_rgb.jpg"
 """While a job runs: the latest snapshot's colour image."""
 PARTIAL_FRAME_MASK = "partial_frame_mask.jpg"
-"""While a job runs: the latest snapshot's frame with its masks (red: moving, yellow: potentially dynamic)."""
+"""While a job runs: the latest snapshot's frame with its masks: coloured by segmentation class (potentially dynamic
+classes strongly, the others faintly; partial.json's ``frame_legend`` lists them), the moving pixels outlined in red;
+without classes, potentially dynamic pixels yellow and moving ones red."""
 PARTIALS = (PARTIAL_STATE, PARTIAL_TRAJECTORY, PARTIAL_KEYFRAMES, PARTIAL_MAP, PARTIAL_FRAME_RGB, PARTIAL_FRAME_MASK)
 """The snapshot files of a running job; removed when it ends (its final artifacts replace them)."""
 
@@ -56,7 +58,7 @@ _FRAME_IMAGE = re.compile(r"^frame_(\d{6,})_([a-z]+)\.(jpg|png)$")
 
 
 def frame_image(index: int, kind: str) -> str:
-    """The name of frame ``index``'s preview image of ``kind`` (rgb, mask, restored)."""
+    """The name of frame ``index``'s preview image of ``kind`` (rgb, classes, mask, restored)."""
     return f"frame_{index:06d}_{kind}.jpg"
 
 

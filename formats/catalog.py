@@ -28,7 +28,7 @@ class StageContract:
 
 STAGE_CONTRACTS: dict[str, StageContract] = {
     c.name: c for c in (
-        StageContract("segmentation", provides=("potentially_dynamic",)),
+        StageContract("segmentation", provides=("potentially_dynamic", "class_labels")),
         # Extracts the frame's features itself; with segmentation's mask (and `culling.use_segmentation`,
         # default on) it judges the marked objects, without one it judges geometric clusters alone.
         StageContract("culling", uses=("potentially_dynamic",),

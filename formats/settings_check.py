@@ -2,7 +2,8 @@
 
 A setting's spec is what ``formats/settings_ranges.json`` publishes (generated from the config dataclasses by
 ``worker.slam.ranges``): its ``type`` (``bool``, ``int``, ``float``, ``str``; others are not checked here),
-optionally a valid range ``min..max`` (inclusive) and a ``below``/``at_most`` partner that bounds it from above.
+or for a list of names the ``choices`` its items may take, optionally a valid range ``min..max`` (inclusive)
+and a ``below``/``at_most`` partner that bounds it from above.
 The api checks a job's config against the published specs with :func:`check_config`; the worker checks each
 override of its dataclasses with :func:`check_setting` and :func:`check_pair`. Both raise
 :class:`formats.errors.SpecError` naming the field, which each side turns into its own error class.
@@ -69,6 +70,20 @@ def check_setting(key: str, value: Any, kind: str, bounds: tuple[float, float] |
     return normal
 
 
+def check_choices(key: str, value: Any, choices: list[str]) -> None:
+    """``value`` of the list setting ``key`` is None, a list of names or a comma-separated string of names, each
+    one of ``choices``; else a :class:`SpecError` naming the field and the first unknown name."""
+    if value is None:
+        return
+    names = [n.strip() for n in value.split(",") if n.strip()] if isinstance(value, str) else value
+    if not isinstance(names, list | tuple) or not all(isinstance(n, str) for n in names):
+        raise SpecError(f"config {key} must be a list of names, got {_shown(value)}", {"field": key})
+    unknown = [n for n in names if n not in choices]
+    if unknown:
+        raise SpecError(f"config {key}: unknown name {unknown[0]!r}", {"field": key, "value": unknown[0][:64],
+                                                                       "allowed": list(choices)})
+
+
 def check_pair(rule: str, lo_key: str, lo: Any, hi_key: str, hi: Any) -> None:
     """``lo`` (of ``lo_key``) is ``below``/``at_most`` (the ``rule``) ``hi`` (of ``hi_key``), else a
     :class:`SpecError` naming both fields."""
@@ -93,7 +108,10 @@ def check_config(config: Mapping[str, Any], specs: SettingsSpecs | None = None) 
             if not any(specs.get(prefix, {}).get("type") == "dict" for prefix in _prefixes(key)):
                 raise SpecError(f"unknown config field {key!r}", {"field": key})
             continue
-        check_setting(key, value, spec["type"], (spec["min"], spec["max"]) if "min" in spec else None)
+        if "choices" in spec:
+            check_choices(key, value, spec["choices"])
+        else:
+            check_setting(key, value, spec["type"], (spec["min"], spec["max"]) if "min" in spec else None)
     given = dict(flat)
     for lo_key, spec in specs.items():
         for rule in PAIR_RULES:

@@ -7,8 +7,9 @@ small file, how a live session's pose reaches the page; written on its own threa
 ``worker.latest_file``); every ``interval_s`` it writes the trajectory and the
 keyframes so far (TUM), the map so far (each keyframe's points back-projected once from its dense copy and moved
 to the keyframe's current pose; the sparse map's points when the run keeps no dense copies) and the frame with
-its masks: gathered on the pipeline thread, written on a writer thread. The files are removed when the job ends
-(its final artifacts replace them).
+its masks, coloured by segmentation class (the classes and their colours in partial.json's `frame_legend`):
+gathered on the pipeline thread, written on a writer thread. The files are removed when the job ends (its final
+artifacts replace them).
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from formats import artifacts
+from formats.class_palette import class_overlay, legend, present_classes
 from formats.ply import write_ply
 from storage.artifacts import ArtifactStore
 from worker.latest_file import LatestFile
@@ -31,7 +33,7 @@ from worker.latest_file import LatestFile
 if TYPE_CHECKING:
     from worker.slam.io.sequence import Frame
     from worker.slam.run.pipeline_run import PipelineRun
-    from worker.slam.stages import FrameInputs
+    from worker.slam.stages import ClassLabels, FrameInputs
     from worker.slam.tracking.result import TrackResult
 
 log = logging.getLogger("worker.snapshots")
@@ -79,6 +81,7 @@ class _Snapshot:
     rgb: np.ndarray
     potentially_dynamic: np.ndarray | None
     dynamic_mask: np.ndarray | None
+    class_labels: ClassLabels | None = None
 
 
 @dataclass
@@ -105,6 +108,9 @@ class PartialWriter:
                                   "vtdslam-partial-state") if self.config.background else None)
         self.error: str | None = None
         """Why snapshots stopped being written (the run goes on; the job's metrics name it as a warning)."""
+        self.legend: list[dict[str, Any]] | None = None
+        """The classes in the latest frame image and their colours (`formats.class_palette.legend`), once one was
+        coloured by class; in partial.json as `frame_legend`."""
 
     def arrival(self, index: int, at: float) -> None:
         """When frame ``index`` reached the service (Unix seconds): reported beside its pose."""
@@ -141,6 +147,8 @@ class PartialWriter:
         """partial.json, rewritten after every frame."""
         state = {"frames": self.frames, "tracked": self.tracked, "map_points": self.map_points, **self.counts, **extra,
                  "updated": time.time(), "recent": list(self.recent)}  # entries are never changed once listed
+        if self.legend is not None:  # replaced whole by the image writer, never changed in place
+            state["frame_legend"] = self.legend
         if self._state is not None:
             self._state.put(lambda: json.dumps(state).encode())
         else:
@@ -182,7 +190,7 @@ class PartialWriter:
             sparse = pts.pos[: pts.n][pts.alive[: pts.n]].astype(np.float32)
         return _Snapshot(self.frames, list(self.stamps), list(self.poses), [kf.timestamp for kf in smap.keyframes],
                          [kf.T_WC.copy() for kf in smap.keyframes], clouds, sparse, frame.rgb,
-                         inputs.potentially_dynamic, inputs.dynamic_mask)
+                         inputs.potentially_dynamic, inputs.dynamic_mask, inputs.class_labels)
 
     def _write_logged(self, snap: _Snapshot) -> None:
         try:
@@ -219,14 +227,24 @@ class PartialWriter:
         import cv2
 
         rgb = snap.rgb
+        for name, img in ((artifacts.PARTIAL_FRAME_RGB, rgb), (artifacts.PARTIAL_FRAME_MASK, self._overlay(snap))):
+            ok, data = cv2.imencode(".jpg", cv2.cvtColor(img, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 80])
+            if ok:
+                self._put(name, data.tobytes())
+
+    def _overlay(self, snap: _Snapshot) -> np.ndarray:
+        """The frame coloured by class (`formats.class_palette`; the moving pixels outlined), its legend kept for
+        partial.json; without the network's classes (geometry only, truth masks) the potentially dynamic pixels
+        in yellow, the moving ones in red."""
+        rgb, seg = snap.rgb, snap.class_labels
+        if seg is not None and seg.labels.shape == rgb.shape[:2]:
+            self.legend = legend(present_classes(seg.labels, seg.classes), seg.dynamic_classes)
+            return class_overlay(rgb, seg.labels, seg.classes, seg.dynamic_classes, snap.dynamic_mask)
         overlay = rgb.copy()
         for mask, colour in ((snap.potentially_dynamic, (250, 210, 40)), (snap.dynamic_mask, (230, 40, 30))):
             if mask is not None and mask.shape == rgb.shape[:2] and mask.any():
                 overlay[mask] = (0.45 * overlay[mask] + 0.55 * np.array(colour)).astype(np.uint8)
-        for name, img in ((artifacts.PARTIAL_FRAME_RGB, rgb), (artifacts.PARTIAL_FRAME_MASK, overlay)):
-            ok, data = cv2.imencode(".jpg", cv2.cvtColor(img, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 80])
-            if ok:
-                self._put(name, data.tobytes())
+        return overlay
 
     def close(self) -> None:
         """Wait for the snapshot and the state being written (none is written after)."""

@@ -4,10 +4,10 @@ Through the pages only: upload a generated sequence (drag-and-drop input, progre
 error in words, the same archive again refused as a duplicate, an upload cancelled half-way leave nothing
 behind, start a job, follow it live to the end, see it on the first page, check the job page's metrics table,
 truth scores and SVG plots, open the embedded 3D viewer (≥ 10 s of real time for SwiftShader's WebGL), run a
-named batch and read its table, plots and truth scores, the full run's previews in the order rgb, mask, restored
-and its code version, see a cancelled job shown as cancelled; then every page at 400 and 1400 px wide: no
-sideways page scroll, every button on screen, no console error, a "scroll sideways" hint on exactly the tables
-that do not fit (the sequence, jobs and metrics tables at 400 px).
+named batch and read its table, plots and truth scores, the full run's previews in the order rgb, classes, mask,
+restored, its segmentation classes and its code version, see a cancelled job shown as cancelled; then every page
+at 400 and 1400 px wide: no sideways page scroll, every button on screen, no console error, a "scroll sideways"
+hint on exactly the tables that do not fit (the sequence, jobs and metrics tables at 400 px).
 Screenshots of every page go to ``$VTD_SCREENSHOT_DIR`` (default: a temp folder printed by the test); the
 job page's time to first render and page weight on loopback are printed.
 
@@ -320,11 +320,13 @@ def test_dashboard_flow(page, js_errors: list[str], service: ServiceProcesses, a
     expect(page.locator("#truth-table")).to_contain_text("Mask IoU")
     expect(page.locator("#truth-table")).to_contain_text("Restoration PSNR")
     expect(page.locator("#truth-table")).to_contain_text("Missed by segmentation")  # MSNET's run splits the misses
-    # the frames as a reader follows them: the input, the mask culled from it, the frame restored behind it
+    # the frames as a reader follows them: the input, its classes, the mask culled from it, the frame restored behind it
     expect(page.locator("#previews figure").first).to_be_visible()
     captions = page.locator("#previews figcaption").all_inner_texts()  # "frame 000012 rgb"
-    assert _preview_order_ok(captions) and {c.rsplit(" ", 1)[-1] for c in captions} >= {"rgb", "mask", "restored"}, \
-        captions
+    assert _preview_order_ok(captions) and {c.rsplit(" ", 1)[-1] for c in captions} >= {"rgb", "classes", "mask",
+                                                                                   "restored"}, captions
+    expect(page.locator("#classes-card")).to_be_visible()  # the segmentation classes, with their legend
+    expect(page.locator("#classes-card")).to_contain_text("potentially dynamic: person")
     # the code that produced the figures
     from formats.version import package_version
 
@@ -363,11 +365,11 @@ def test_dashboard_flow(page, js_errors: list[str], service: ServiceProcesses, a
     assert not js_errors, js_errors
 
 
-PREVIEW_KINDS = ("rgb", "mask", "restored")
+PREVIEW_KINDS = ("rgb", "classes", "mask", "restored")  # webui/static/js/job.js
 
 
 def _preview_order_ok(captions: list[str]) -> bool:
-    """Previews by frame, each frame's in the order rgb, mask, restored (not alphabetical)."""
+    """Previews by frame, each frame's in the order rgb, classes, mask, restored (not alphabetical)."""
     keys = [(c.rsplit(" ", 1)[0], c.rsplit(" ", 1)[-1]) for c in captions]
     rank = [(frame, PREVIEW_KINDS.index(kind) if kind in PREVIEW_KINDS else len(PREVIEW_KINDS)) for frame, kind in keys]
     return rank == sorted(rank)

@@ -76,3 +76,25 @@ def test_the_published_defaults_pass() -> None:
     ranges = settings_ranges()
     check_config({key: spec["default"] for key, spec in ranges.items()})
     assert PipelineConfig().with_overrides({"dense.enabled": "false"}).to_dict()["dense"]["enabled"] is False
+
+
+def test_a_list_setting_takes_only_its_choices() -> None:
+    from formats.settings_check import check_choices
+
+    specs = {"seg.names": {"type": "null", "default": None, "choices": ["person", "vehicle", "car"]}}
+    for ok in (None, [], ["person", "car"], "vehicle, car", {"seg": {"names": ["vehicle"]}}):
+        check_config(ok if isinstance(ok, dict) else {"seg.names": ok}, specs)
+    for bad, fragment in ((["person", "forklift"], "unknown name 'forklift'"), ("car,boat", "unknown name 'boat'"),
+                          ([1], "a list of names"), (5, "a list of names")):
+        with pytest.raises(SpecError, match=fragment) as err:
+            check_config({"seg.names": bad}, specs)
+        assert err.value.detail["field"] == "seg.names"
+    check_choices("seg.names", ["car"], ["car"])
+
+
+def test_the_published_dynamic_classes_choices_are_groups_voc_and_coco_names() -> None:
+    from formats.class_names import COCO_CLASSES
+    from worker.slam.segmentation.classes import DYNAMIC_GROUPS, VOC_CLASSES
+
+    choices = settings_ranges()["segmentation.segmenter.dynamic_classes"]["choices"]
+    assert set(choices) == set(DYNAMIC_GROUPS) | set(VOC_CLASSES[1:]) | set(COCO_CLASSES)

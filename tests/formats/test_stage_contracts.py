@@ -31,7 +31,8 @@ def test_culling_alone_and_without_restoration_pass() -> None:
 
 
 def test_provided_before() -> None:
-    assert provided_before(["segmentation", "culling"], "culling") == {"potentially_dynamic"}
+    assert provided_before(["segmentation", "culling"], "culling") == {"potentially_dynamic", "class_labels"}
     assert provided_before(["culling"], "culling") == frozenset()
-    assert provided_before(["segmentation", "unknown"], "culling") == {"potentially_dynamic"}  # not listed: all
+    # not listed: all
+    assert provided_before(["segmentation", "unknown"], "culling") == {"potentially_dynamic", "class_labels"}
     assert list(STAGE_CONTRACTS) == ["segmentation", "culling", "restoration"]

@@ -168,7 +168,7 @@ def test_ids_in_urls_are_escaped(client: TestClient) -> None:
     ("css/app.css", "text/css"), ("js/app.js", "javascript"), ("js/sequences.js", "javascript"),
     ("js/jobs.js", "javascript"), ("js/job.js", "javascript"), ("js/batch.js", "javascript"),
     ("js/activity.js", "javascript"), ("js/plot.js", "javascript"), ("js/batch_plots.js", "javascript"),
-    ("js/live.js", "javascript"),
+    ("js/live.js", "javascript"), ("js/classes.js", "javascript"),
 ])
 def test_static_assets_are_served(client: TestClient, name: str, ctype: str) -> None:
     r = client.get(f"/static/{name}")
@@ -197,7 +197,7 @@ def test_include_dashboard_twice_is_harmless(settings: Settings) -> None:
 def test_job_page_weight(client: TestClient) -> None:
     html = client.get("/jobs/0123456789abcdef")
     assets = re.findall(r'(?:href|src)="(/static/[^"?]+)', html.text)
-    assert len(assets) == 5  # app.css, app.js, plot.js, job.js, live.js
+    assert len(assets) == 6  # app.css, app.js, plot.js, classes.js, job.js, live.js
     sizes = {a: len(client.get(a).content) for a in assets}
     total = len(html.content) + sum(sizes.values())
     print(f"\njob page weight: {total} bytes (html {len(html.content)}, " +

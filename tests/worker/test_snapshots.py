@@ -76,3 +76,33 @@ def test_a_failed_snapshot_never_fails_the_job(tmp_path: Path, monkeypatch: pyte
         assert stored is not None and "partial results not written: OSError: disk gone" in stored.metrics["warnings"]
     on_disk = json.loads((ctx.store.job_dir(job.id) / artifacts.METRICS).read_text())
     assert "partial results not written: OSError: disk gone" in on_disk["warnings"]
+
+
+def test_the_current_frame_is_coloured_by_class_with_its_legend(tmp_path: Path) -> None:
+    import cv2
+    import numpy as np
+
+    from formats.class_palette import class_colour
+    from storage.artifacts import ArtifactStore
+    from worker.slam.stages import ClassLabels
+    from worker.snapshots import _Snapshot
+
+    writer = PartialWriter(ArtifactStore(tmp_path), "job1", SnapshotConfig(background=False))
+    rgb = np.full((60, 80, 3), 120, np.uint8)
+    labels = np.zeros((60, 80), np.uint8)
+    labels[10:50, 10:40] = 1  # a dog
+    labels[10:50, 50:70] = 2  # a sofa: seen, not masked
+    seg = ClassLabels(labels, ("background", "dog", "sofa"), ("dog",))
+    snap = _Snapshot(1, [], [], [], [], [], None, rgb, labels == 1, np.zeros((60, 80), bool), seg)
+    writer._write_images(snap)
+    writer.write_state()
+    d = writer.store.job_dir("job1")
+    state = json.loads((d / artifacts.PARTIAL_STATE).read_text())
+    assert [(e["name"], e["dynamic"]) for e in state["frame_legend"]] == [("dog", True), ("sofa", False)]
+    bgr = cv2.imread(str(d / artifacts.PARTIAL_FRAME_MASK))
+    assert bgr is not None
+    img = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB).astype(int)
+    dog, sofa = np.array(class_colour("dog")), np.array(class_colour("sofa"))
+    assert np.abs(img[30, 25] - (0.45 * 120 + 0.55 * dog)).max() < 8  # strongly tinted in the dog's colour
+    assert np.abs(img[30, 60] - (0.8 * 120 + 0.2 * sofa)).max() < 8  # faintly in the sofa's
+    assert np.abs(img[5, 5] - 120).max() < 4  # background as it was

@@ -15,8 +15,8 @@ import numpy as np
 
 from formats import artifacts
 from storage.errors import NotFound
-from webui.viewer.run_data import load_run, read_tum
-from webui.viewer.scene import _read_image, build_scene, height_colors
+from webui.viewer.run_data import load_run, read_tum, valid_legend
+from webui.viewer.scene import _read_image, build_scene, height_colors, legend_html
 
 log = logging.getLogger(__name__)
 
@@ -28,6 +28,17 @@ def partial_state(run_dir: Path) -> str:
     if (run_dir / artifacts.PARTIAL_STATE).is_file() or (run_dir / artifacts.PARTIAL_TRAJECTORY).is_file():
         return PARTIAL
     return FINAL if (run_dir / artifacts.TRAJECTORY).is_file() else NOTHING
+
+
+def frame_legend(run_dir: Path) -> list[dict]:
+    """partial.json's `frame_legend` (the classes of the current frame image, `worker.snapshots`); [] without."""
+    import json
+
+    try:
+        state = json.loads((run_dir / artifacts.PARTIAL_STATE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return []
+    return valid_legend(state.get("frame_legend")) if isinstance(state, dict) else []
 
 
 def _mtime(path: Path) -> float:
@@ -48,6 +59,8 @@ class LiveScene:
         self.shown: dict[str, int] = {"poses": 0, "keyframes": 0, "map": 0}
         """What the scene shows now (poses, keyframes, map points)."""
         self.image: Any = None
+        self.legend: Any = None
+        self.legend_text = ""
         server.gui.add_markdown(f"**{title}** (running: the map and trajectory so far, updated as it goes)")
         self.status = server.gui.add_markdown("waiting for the first snapshot…")
         server.scene.set_up_direction((0.0, -1.0, 0.0))
@@ -104,11 +117,25 @@ class LiveScene:
             self.shown["map"] = len(pts)
         if self._changed(artifacts.PARTIAL_FRAME_MASK):
             img = _read_image(d / artifacts.PARTIAL_FRAME_MASK)
+            entries = frame_legend(d)
             if self.image is None:
-                self.image = self.server.gui.add_image(img, label="Current frame (red: moving, yellow: "
-                                                            "potentially dynamic)")
+                label = ("Current frame (coloured by class; red outline: moving)" if entries else
+                         "Current frame (red: moving, yellow: potentially dynamic)")
+                self.image = self.server.gui.add_image(img, label=label)
             else:
                 self.image.image = img
+            self._show_legend(entries)
+
+    def _show_legend(self, entries: list[dict]) -> None:
+        """The current frame's classes in their colours, under the image (only the classes in that frame)."""
+        text = legend_html(entries)
+        if not text or text == self.legend_text:
+            return
+        self.legend_text = text
+        if self.legend is None:
+            self.legend = self.server.gui.add_html(text)
+        else:
+            self.legend.content = text
 
     def _frame(self, positions: np.ndarray) -> None:
         """Point the initial camera at the run once it has moved a little."""

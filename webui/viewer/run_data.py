@@ -4,8 +4,8 @@ Artifacts used (all optional except the trajectory): `trajectory.txt` (TUM, T_WC
 is frame k only when no frame was lost, so frames are matched by timestamp), `groundtruth_aligned.txt`
 (TUM, ground truth expressed in the estimate's frame), `keyframes.txt` (TUM), `map.ply` (binary little-endian
 PLY with float x y z and uchar red green blue), `frame_stats.csv` (formats.frame_stats: `frame_index`,
-`timestamp`, `ate_error`...), `frame_NNNNNN_{rgb,mask,restored}.jpg` (flat names: the artifact store keeps one
-folder per run).
+`timestamp`, `ate_error`...), `frame_NNNNNN_{rgb,classes,mask,restored}.jpg` (flat names: the artifact store keeps
+one folder per run), `metrics.json` (its segmentation section's `legend`: the classes the previews are coloured by).
 """
 from __future__ import annotations
 
@@ -45,6 +45,8 @@ class RunData:
     """(N,) int: the frame of each trajectory pose (trajectory.txt holds only tracked frames, so pose k is not
     frame k when frames were lost), from the frame stats by timestamp; -1 where unknown."""
     previews: dict[int, dict[str, Path]] = field(default_factory=dict)
+    legend: list[dict] = field(default_factory=list)
+    """The segmentation classes seen in the run and their colours (`formats.class_palette.legend`), if any."""
 
 
 def read_tum(path: Path) -> Poses:
@@ -80,6 +82,27 @@ def _per_pose(run_dir: Path, stamps: np.ndarray) -> tuple[np.ndarray | None, np.
             np.array([frames.get(round(t, 4), -1) for t in stamps], dtype=np.int64))
 
 
+def read_legend(run_dir: Path) -> list[dict]:
+    """metrics.json's `segmentation.legend` (entries with a name and a #rrggbb colour); [] when absent or unreadable."""
+    import json
+
+    try:
+        seg = json.loads((run_dir / artifacts.METRICS).read_text(encoding="utf-8")).get("segmentation")
+    except (OSError, ValueError, AttributeError):
+        return []
+    entries = seg.get("legend") if isinstance(seg, dict) else None
+    return valid_legend(entries)
+
+
+def valid_legend(entries: object) -> list[dict]:
+    """The well-formed entries of a legend list (`name` str, `colour` #rrggbb, `dynamic` bool)."""
+    if not isinstance(entries, list):
+        return []
+    return [{"name": e["name"], "colour": e["colour"], "dynamic": bool(e.get("dynamic"))} for e in entries
+            if isinstance(e, dict) and isinstance(e.get("name"), str) and isinstance(e.get("colour"), str)
+            and len(e["colour"]) == 7 and e["colour"].startswith("#")]
+
+
 def _is_file(path: Path) -> bool:
     """``Path.is_file`` that lets a PermissionError through (it would say "no such file")."""
     try:
@@ -108,6 +131,7 @@ def load_run(run_dir: Path, max_points: int = 400_000) -> RunData:
             pts, cols = pts[keep], (cols[keep] if cols is not None else None)
         data.points, data.colors = pts, cols
     data.ate_error, data.frame_index = _per_pose(run_dir, data.trajectory.timestamps)
+    data.legend = read_legend(run_dir)
     for f in sorted(run_dir.glob("frame_*_*.*")):
         named = artifacts.parse_frame_image(f.name)
         if named is not None:

@@ -1,6 +1,7 @@
 """Build one run's 3D scene and controls on a viser server."""
 from __future__ import annotations
 
+import html
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +44,19 @@ def _segments(p: Poses, colors: np.ndarray | None = None) -> tuple[np.ndarray, n
     if colors is None:
         return seg, np.full((len(seg), 2, 3), 150, np.uint8)
     return seg, np.stack([colors[:-1], colors[1:]], axis=1)
+
+
+def legend_html(entries: list[dict], title: str = "") -> str:
+    """HTML naming each class beside a square of its colour (`formats.class_palette.legend` entries); the classes
+    that are not potentially dynamic are marked "not masked". Empty without entries."""
+    if not entries:
+        return ""
+    rows = "".join(
+        f'<div><span style="display:inline-block;width:0.9em;height:0.9em;margin-right:0.4em;'
+        f'background:{html.escape(e["colour"])}"></span>{html.escape(e["name"])}'
+        f'{"" if e["dynamic"] else " <small>(not masked)</small>"}</div>' for e in entries)
+    head = f"<div><b>{html.escape(title)}</b></div>" if title else ""
+    return f'<div style="font-size:0.85em">{head}{rows}</div>'
 
 
 def _read_image(path: Path, max_w: int = 480) -> np.ndarray:
@@ -114,10 +128,14 @@ def _frame_slider(server, data: RunData, fov_rad: float, aspect: float) -> None:
     image = None
     kind = None
     if frames:
-        kind = server.gui.add_dropdown("Overlay", ("rgb", "mask", "restored"), initial_value="rgb")
+        kinds = tuple(k for k in ("rgb", "classes", "mask", "restored")
+                      if any(k in files for files in data.previews.values()))
+        kind = server.gui.add_dropdown("Overlay", kinds or ("rgb",), initial_value=kinds[0] if kinds else "rgb")
         image = server.gui.add_image(_read_image(data.previews[frames[0]].get("rgb")
                                                  or next(iter(data.previews[frames[0]].values()))),
                                      label="Frame")
+        if data.legend:
+            server.gui.add_html(legend_html(data.legend, "Classes (overlay 'classes'; red outline: moving)"))
 
     def refresh(_: Any = None) -> None:
         i = int(slider.value)

@@ -43,6 +43,8 @@ def _walk(obj: Any, prefix: str, out: dict[str, dict[str, Any]]) -> None:
         bounds = f.metadata.get("range")
         if bounds is not None:
             entry["min"], entry["max"] = bounds
+        if "choices" in f.metadata:  # the names a list setting's items may take
+            entry["choices"] = list(f.metadata["choices"])
         for rel in ("below", "at_most"):  # the field that bounds this one (storage.config_ranges checks it)
             if rel in f.metadata:
                 entry[rel] = f"{prefix}.{f.metadata[rel]}"

@@ -27,6 +27,18 @@ from worker.slam.tracking.inputs import TrackInputs
 from worker.slam.truth import Truth
 
 
+@dataclass(frozen=True)
+class ClassLabels:
+    """A frame's segmentation classes as the later stages, the previews and the scores see them."""
+
+    labels: np.ndarray
+    """(H, W) uint8 indices into `classes` (0 = background)."""
+    classes: tuple[str, ...]
+    """The segmenter's class names."""
+    dynamic_classes: tuple[str, ...]
+    """The classes the run treats as potentially dynamic (a subset of `classes`)."""
+
+
 @dataclass
 class FrameInputs:
     """What the stages built for one frame (all optional; images are the frame's H,W). The fields are the
@@ -48,6 +60,8 @@ class FrameInputs:
     instead of extracting its own."""
     potentially_dynamic: np.ndarray | None = None
     """bool (H,W): pixels of potentially dynamic classes (segmentation)."""
+    class_labels: ClassLabels | None = None
+    """The network's classes of the frame (segmentation; None for its truth source): previews colour by them."""
     dynamic_mask: np.ndarray | None = None
     """bool (H,W): pixels judged moving (culling)."""
     held_back: Features | None = None

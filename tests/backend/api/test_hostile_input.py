@@ -186,6 +186,9 @@ def test_a_database_error_answers_500_with_a_request_id_and_no_sql(env, seq_tgz,
     ({"features.n_levels": 2.5}, "features.n_levels must be an integer"),
     ({"features.n_levels": "8"}, "features.n_levels must be an integer"),
     ({"features.n_levelz": 8}, "unknown config field"),
+    ({"segmentation": {"segmenter": {"dynamic_classes": ["person", "forklift"]}}}, "unknown name 'forklift'"),
+    ({"segmentation.segmenter.dynamic_classes": "vehicle,unicorn"}, "unknown name 'unicorn'"),
+    ({"segmentation.segmenter.dynamic_classes": [3]}, "must be a list of names"),
 ])
 def test_settings_out_of_range_are_422_naming_field_and_range(env, seq_id, config, fragment) -> None:
     client, _ = env

@@ -130,7 +130,11 @@
   ];
   function truthTable(m) {
     const rows = TRUTH.filter(([, , path]) => isNum(dig(m, ...path)));
-    $("truth-card").hidden = !rows.length;
+    const byClass = VTDClasses.recallTable(m);
+    $("truth-by-class-box").replaceChildren(...(byClass ? [el("h3", {}, "By true mover class"),
+      el("p", { class: "muted small" }, "Of each class's truly moving pixels, the share segmentation marked potentially dynamic and the share culling judged moving."),
+      byClass] : []));
+    $("truth-card").hidden = !rows.length && !byClass;
     if (!rows.length) return;
     const scored = dig(m, "culling", "truth", "frames_scored") || {};
     $("truth-table").replaceChildren(
@@ -138,6 +142,20 @@
       el("tbody", {}, ...rows.map(([label, what, path, fmt]) => el("tr", {},
         el("td", {}, label), el("td", { class: "n" }, fmt(dig(m, ...path))), el("td", { class: "muted small" }, what)))));
     $("truth-note").textContent = isNum(scored.mask) ? `Culling scored on ${scored.mask} frames.` : "";
+  }
+
+  // ---------- segmentation classes (metrics.json's segmentation section) ----------
+  function classesCard(m) {
+    const seg = m.segmentation;
+    if (!seg || typeof seg !== "object" || seg.source !== "network") return;
+    $("classes-card").hidden = false;
+    const dyn = Array.isArray(seg.dynamic_classes) ? seg.dynamic_classes.join(", ") : "—";
+    $("classes-note").textContent = `${seg.backend || "segmenter"}: ${Array.isArray(seg.classes) ? seg.classes.length : "?"} classes; `
+      + `potentially dynamic: ${dyn || "none"}. The classes seen, in the colours the frames and the 3D viewer use:`;
+    $("classes-legend").replaceChildren(VTDClasses.legend(seg.legend));
+    const table = VTDClasses.shareTable(seg);
+    $("classes-share").replaceChildren(...(table ? [table] : [el("p", { class: "muted" }, "No class covered any pixel.")]));
+    $("previews-legend").replaceChildren(VTDClasses.legend(seg.legend));
   }
 
   // ---------- data files ----------
@@ -192,6 +210,7 @@
     const m = job.metrics || {};
     metricsTable(m);
     truthTable(m);
+    classesCard(m);
     const timings = Object.entries(m.timings_ms || {}).filter(([, v]) => isNum(v));
     if (timings.length) {
       barChart($("plot-timing"), timings.map(([k, v]) => ({ label: k.replace(/_/g, " "), value: v })),
@@ -221,8 +240,9 @@
   }
 
   // A frame's previews (formats.artifacts.frame_image: frame_000012_rgb.jpg) in the order a reader follows them:
-  // the input, the mask culled from it, the frame restored behind it; by frame, unknown kinds last by name.
-  const PREVIEW_KINDS = ["rgb", "mask", "restored"];
+  // the input, its segmentation classes, the mask culled from it, the frame restored behind it; by frame, unknown
+  // kinds last by name.
+  const PREVIEW_KINDS = ["rgb", "classes", "mask", "restored"];
   function previewKey(name) {
     const m = /^frame_(\d+)_([a-z]+)\./.exec(name);
     if (!m) return [Infinity, PREVIEW_KINDS.length, name];
@@ -237,6 +257,7 @@
   function previews(images) {
     if (!images.length) return;
     $("previews-card").hidden = false;
+    $("previews-note").hidden = !images.some((a) => /_classes\./.test(a.name));
     $("previews").replaceChildren(...[...images].sort(byPreviewOrder).map((a) => el("figure", {},
       el("a", { href: a.url, target: "_blank" }, el("img", { src: a.url, alt: a.name, loading: "lazy" })),
       el("figcaption", {}, a.name.replace(/\.(png|jpe?g)$/i, "").replace(/_/g, " ")))));

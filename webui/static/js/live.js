@@ -29,6 +29,8 @@
       const img = el("img", { id: "live-frame", alt: "the latest frame with its masks", style: "max-width: 100%" });
       img.onload = () => $("live-frame-box").replaceChildren(img); // swapped in once loaded: no flicker
       img.src = `/api/v1/jobs/${jobId}/artifacts/partial_frame_mask.jpg?t=${s.updated}`;
+      // the classes in that frame, in their colours (worker/snapshots.py: partial.json's frame_legend)
+      if (window.VTDClasses) $("live-legend").replaceChildren(VTDClasses.legend(s.frame_legend));
     }
     if (path.size >= 2 && path.size !== lastDrawn) {
       lastDrawn = path.size;

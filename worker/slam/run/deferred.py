@@ -72,8 +72,8 @@ class DeferredWork:
             stage_ms[entry] += ms
             if res.keyframe is not None and out.restored_rgb is not None and out.restored_depth is not None:
                 res.keyframe.set_dense_images(out.restored_rgb, out.restored_depth, self.stride)
-            if keep_previews and out.previews:
-                self.previews.kept[res.index] = out.previews
+            if keep_previews:
+                self.previews.keep(res.index, out.previews or {})
             for key, val in numbers(out.info).items():
                 stage_info[key].append(val)
                 row[key] = out.info[key]

@@ -20,6 +20,7 @@ from types import TracebackType
 
 import numpy as np
 
+from formats.class_palette import class_overlay
 from worker.slam.camera import Camera
 from worker.slam.config import PipelineConfig
 from worker.slam.errors import TrackingFailed
@@ -110,8 +111,7 @@ class PipelineRun:
         self._record(item.frame, inputs)
         res = self._track(item.frame, inputs)
         self.log.add_stage_info(inputs.info)
-        if inputs.previews:
-            self.previews.offer(item.frame.index, inputs.previews)
+        self._offer_previews(item.frame, inputs)
         if res.keyframe is not None:
             self._map(res)
         k = len(self.log)
@@ -125,6 +125,19 @@ class PipelineRun:
         if self.on_step is not None:
             self.on_step(self, item.frame, inputs, res)
         return res
+
+    def _offer_previews(self, frame: Frame, inputs: FrameInputs) -> None:
+        """The stages' previews of `frame`, with the frame coloured by its segmentation classes when a preview of it
+        is due (attached to the previews its deferred work brings later, if it has some)."""
+        labels = inputs.class_labels
+        extra: dict[str, np.ndarray] = {}
+        if labels is not None and self.previews.wants(frame.index):
+            extra = {"rgb": frame.rgb, "classes": class_overlay(frame.rgb, labels.labels, labels.classes,
+                                                                labels.dynamic_classes, inputs.dynamic_mask)}
+        if inputs.previews or (extra and inputs.deferred is None):
+            self.previews.offer(frame.index, {**extra, **(inputs.previews or {})})
+        elif extra:
+            self.previews.attach(frame.index, extra)
 
     def _frame_context(self) -> StageContext:
         """The run's context with the tracker's prediction for the coming frame, its last tracked pose and the

@@ -12,7 +12,9 @@ class PreviewPicker:
         step = max(1, total // (count + 1))
         self.wanted = {start + step * (i + 1) for i in range(count)}
         self.kept: dict[int, dict[str, np.ndarray]] = {}
-        """RGB uint8 images by frame index, then by kind (e.g. 'rgb', 'mask', 'restored')."""
+        """RGB uint8 images by frame index, then by kind (e.g. 'rgb', 'classes', 'mask', 'restored')."""
+        self.attached: dict[int, dict[str, np.ndarray]] = {}
+        """Images of frames whose other previews come later (deferred work), merged into them by `keep`."""
 
     def wants(self, index: int) -> bool:
         """Whether a frame with previews at `index` would be kept."""
@@ -27,4 +29,14 @@ class PreviewPicker:
 
     def offer(self, index: int, images: dict[str, np.ndarray]) -> None:
         if self.claim(index):
-            self.kept[index] = images
+            self.keep(index, images)
+
+    def attach(self, index: int, images: dict[str, np.ndarray]) -> None:
+        """Images of frame `index` to keep beside the previews a later `keep` of the same frame brings."""
+        self.attached[index] = images
+
+    def keep(self, index: int, images: dict[str, np.ndarray]) -> None:
+        """Keep `images` of a claimed frame, with what was attached to it (the given images win a clash)."""
+        merged = {**self.attached.pop(index, {}), **images}
+        if merged:
+            self.kept[index] = merged

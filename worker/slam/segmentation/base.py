@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Protocol, runtime_checkable
@@ -17,6 +17,8 @@ from numba import njit
 
 from worker.slam.config import valid
 from worker.slam.errors import ConfigError, SlamError
+from worker.slam.segmentation.classes import DYNAMIC_GROUPS
+from worker.slam.segmentation.dynamic_names import DYNAMIC_NAMES, resolve_for_segmenter
 
 
 class SegmentationError(SlamError):
@@ -104,11 +106,19 @@ class SegmenterConfig:
     """msnet: `auto` (CUDA when present, else CPU), `cpu` or `cuda`."""
     threads: int | None = None
     """CPU threads for inference; None leaves the library default (the process may share cores)."""
-    with_probs: bool = True
-    """Also return per-class probabilities at full resolution (costs a resize per class)."""
-    dynamic_classes: tuple[str, ...] | None = None
-    """Override the backend's potentially dynamic classes; None keeps its default (the shipped MSNET checkpoint:
-    person; the teacher: person and chair)."""
+    with_probs: bool = False
+    """Also return per-class probabilities at full resolution (a resize per class: ~20 ms a VGA frame with 21
+    classes). The pipeline needs only the labels, which msnet then upsamples from the classes that win a grid cell
+    (`msnet.segmenter.candidate_labels`)."""
+    dynamic_classes: tuple[str, ...] | None = field(default=None, metadata={"choices": DYNAMIC_NAMES})
+    """The potentially dynamic classes, by class name or group (`person`, `animal`, `vehicle`, `object`; see
+    `segmentation.classes.DYNAMIC_GROUPS`), resolved against the backend's classes (`resolve_for_segmenter`: a
+    class it does not know is not covered; a name that is neither a group, a VOC nor a COCO class is an error).
+    None keeps the backend's default: the checkpoint's own (the shipped person/chair MSNET: person; a 21-class
+    one: `DEFAULT_DYNAMIC`, every group), the teacher's person and chair (with `full_voc`: `DEFAULT_DYNAMIC`)."""
+    full_voc: bool = False
+    """tflite-teacher: all 21 PASCAL VOC classes of a DeepLabV3 model instead of background/person/chair (the
+    others counted as background); its default potentially dynamic classes are then `DEFAULT_DYNAMIC`."""
     guided_radius: int = valid(0, 0, 64)
     """msnet: upsample the network's probabilities with a fast guided filter (grey image as guide) of this
     radius, in pixels of its output grid (13 ≈ 32 px at 640x480); 0 = plain bilinear upsampling. Off: the
@@ -118,6 +128,16 @@ class SegmenterConfig:
     """msnet: the guided filter's edge sensitivity (variance of grey levels in [0, 1]); larger = smoother."""
 
     def __post_init__(self) -> None:
+        names = self.dynamic_classes
+        if isinstance(names, str):  # "person,vehicle" from a form or a command line
+            names = tuple(n.strip() for n in names.split(",") if n.strip())
+        if names is not None:
+            names = tuple(names)
+            unknown = [n for n in names if n not in DYNAMIC_NAMES]
+            if unknown:
+                raise ValueError(f"unknown potentially dynamic class {unknown[0]!r}: name a group "
+                                 f"({', '.join(DYNAMIC_GROUPS)}), a VOC class or a COCO class")
+            object.__setattr__(self, "dynamic_classes", names)  # frozen: a list from JSON becomes a tuple
         if self.guided_radius < 0:
             raise ValueError(f"guided_radius must be >= 0, not {self.guided_radius}")
         if not self.guided_eps > 0:
@@ -156,7 +176,8 @@ def _resolve(spec: str) -> Callable[[SegmenterConfig], Segmenter]:
 
 
 def make_segmenter(config: SegmenterConfig | None = None) -> Segmenter:
-    """Build the configured segmenter. Raises ConfigError for an unknown backend or a missing model file."""
+    """Build the configured segmenter, its potentially dynamic classes resolved from the config's names and groups.
+    Raises ConfigError for an unknown backend, a missing model file or an unknown class name."""
     config = config or SegmenterConfig()
     if config.backend not in _BACKENDS:
         raise ConfigError(f"unknown segmentation backend {config.backend!r}",
@@ -164,4 +185,7 @@ def make_segmenter(config: SegmenterConfig | None = None) -> Segmenter:
     for p in (config.checkpoint, config.model_path):
         if p is not None and not Path(p).is_file():
             raise ConfigError(f"segmentation model file not found: {p}", detail={"path": str(p)})
-    return _resolve(_BACKENDS[config.backend])(config)
+    segmenter = _resolve(_BACKENDS[config.backend])(config)
+    if config.dynamic_classes is not None:  # names and groups -> the backend's class names
+        segmenter.dynamic_classes = resolve_for_segmenter(config.dynamic_classes, segmenter.classes)
+    return segmenter

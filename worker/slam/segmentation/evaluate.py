@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from formats.class_palette import class_overlay
 from worker.slam.segmentation.base import Segmenter
 
 IGNORE = 255
@@ -107,12 +108,5 @@ def tum_person_mask(mask: np.ndarray) -> np.ndarray:
 
 
 def overlay(rgb: np.ndarray, labels: np.ndarray, classes: tuple[str, ...], alpha: float = 0.5) -> np.ndarray:
-    """RGB uint8 visualisation: person red, chair green, other non-background classes blue."""
-    colours = {"person": (255, 0, 0), "chair": (0, 255, 0)}
-    out = rgb.astype(np.float32)
-    for k, name in enumerate(classes):
-        if k == 0:
-            continue
-        m = labels == k
-        out[m] = (1 - alpha) * out[m] + alpha * np.array(colours.get(name, (0, 0, 255)), np.float32)
-    return out.astype(np.uint8)
+    """RGB uint8 visualisation: every non-background class in its palette colour (`formats.class_palette`)."""
+    return class_overlay(rgb, labels, classes, classes, alpha=alpha)

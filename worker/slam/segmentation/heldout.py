@@ -7,7 +7,7 @@ Sets, all from ../shared and none ever trained on by the `cpu-real` recipe:
 - `tum-walking-xyz`: the one walking_xyz frame with its hand-made mask;
 - `bonn-crowd`: every n-th bonn_crowd_dev frame against teacher-made references (`reference_masks`);
 - `7scenes-empty`: people-free 7-Scenes frames 900-999 (held out of `cpu-real`'s backgrounds): only the share
-  of pixels marked person is defined there;
+  of pixels marked potentially dynamic is defined there;
 - `davis-movers`: davis_movers_dev (evaluation only), every frame of its seven clips against the mover's mask
   (cars, riders and their vehicles, a kite-surfer ...): does the potentially-dynamic mask see movers that are not
   only people. Skipped when the folder is absent.
@@ -44,6 +44,9 @@ class HeldOutSet:
     name: str
     images: tuple[EvalImage, ...]
     note: str
+    scored: str = "person"
+    """Which predicted mask is scored: "person", or "dynamic" (every potentially dynamic class: the movers of
+    davis_movers_dev, and what a people-free frame must not mark)."""
 
 
 @dataclass(frozen=True)
@@ -103,7 +106,8 @@ def build_sets(shared: Path, cache_dir: Path, bonn_every: int = 10) -> list[Held
                    "hand-made mask"),
         HeldOutSet("bonn-crowd", tuple(EvalImage(f, _png(r, lambda m: m)) for f, r in zip(bonn, refs)),
                    f"every {bonn_every}th frame, references: {Path(BONN_TEACHER).stem} at 513, 3 px ignore band"),
-        HeldOutSet("7scenes-empty", tuple(EvalImage(f, None) for f in empty), "people-free frames 900-999"),
+        HeldOutSet("7scenes-empty", tuple(EvalImage(f, None) for f in empty), "people-free frames 900-999",
+                   scored="dynamic"),
         *_davis(shared),
     ]
 
@@ -115,7 +119,8 @@ def _davis(shared: Path) -> list[HeldOutSet]:
         return []
     items = tuple(EvalImage(f, _png(f.parent.parent / "masks" / f"{f.stem}.png", lambda m: (m > 127).astype(np.uint8)))
                   for f in frames)
-    return [HeldOutSet("davis-movers", items, f"{len(frames)} frames of 7 clips, the mover's mask (evaluation only)")]
+    return [HeldOutSet("davis-movers", items, f"{len(frames)} frames of 7 clips, the mover's mask (evaluation only)",
+                       scored="dynamic")]
 
 
 def score_set(segmenter: Segmenter, held: HeldOutSet) -> PersonScores:
@@ -124,7 +129,8 @@ def score_set(segmenter: Segmenter, held: HeldOutSet) -> PersonScores:
     for item in held.images:
         rgb = read_rgb(item.image)
         t0 = time.perf_counter()
-        pred = segmenter.segment(rgb).class_mask("person")
+        result = segmenter.segment(rgb)
+        pred = result.dynamic_mask() if held.scored == "dynamic" else result.class_mask("person")
         times.append(time.perf_counter() - t0)
         truth = item.truth() if item.truth is not None else np.zeros(pred.shape, np.uint8)
         if truth.shape != pred.shape:

@@ -1,11 +1,14 @@
 """Pipeline stage: mark the potentially dynamic pixels of each frame (the network, or the sequence's truth masks).
 
-Its mask goes to culling, which judges the marked objects by geometry (`worker.slam.dynamic.stage`).
+Its mask goes to culling, which judges the marked objects by geometry (`worker.slam.dynamic.stage`); the network's
+class map goes on too (`FrameInputs.class_labels`: previews colour by class), and the share of the frames each
+class covered is the stage's summary in metrics.json (`class_share.ClassShares`).
 """
 from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -15,7 +18,8 @@ from worker.slam.config import PipelineConfig, valid
 from worker.slam.errors import SequenceFormatError
 from worker.slam.io.sequence import Frame
 from worker.slam.segmentation.base import SegmenterConfig, make_segmenter
-from worker.slam.stages import FrameInputs, StageContext
+from worker.slam.segmentation.class_share import ClassShares, pixel_counts
+from worker.slam.stages import ClassLabels, FrameInputs, StageContext
 
 
 @dataclass
@@ -38,38 +42,67 @@ class SegmentationStageConfig:
             raise ValueError(f"segmentation.source must be 'network' or 'truth', not {self.source!r}")
 
 
+class Segmented(NamedTuple):
+    """`SegmentationStage.prepare`'s result: the frame's classes, its potentially dynamic pixels (H, W) bool and
+    each class's pixel count (K,) int64, all from the RGB alone."""
+
+    classes: ClassLabels
+    mask: np.ndarray
+    counts: np.ndarray
+
+
 class SegmentationStage:
     contract = STAGE_CONTRACTS["segmentation"]
     name = contract.name
 
     def __init__(self, config: PipelineConfig, camera: Camera) -> None:
         cfg: SegmentationStageConfig = config.section("segmentation")
+        self.backend = cfg.segmenter.backend
         self.segmenter = make_segmenter(cfg.segmenter) if cfg.source == "network" else None
         self.recent: deque[np.ndarray] = deque(maxlen=cfg.memory_frames)  # the network's last masks
+        self.shares: ClassShares | None = None  # the network's classes per frame, from its first frame
 
-    def prepare(self, frame: Frame) -> np.ndarray | None:
-        """The network's potentially dynamic pixels, bool (H,W): from the RGB alone, so the pipeline may run it
+    def prepare(self, frame: Frame) -> Segmented | None:
+        """The network's classes and potentially dynamic pixels: from the RGB alone, so the pipeline may run it
         ahead on another thread. None for the truth source (read in `process`: it needs the run's truth)."""
-        return None if self.segmenter is None else self.segmenter.segment(frame.rgb).dynamic_mask()
+        if self.segmenter is None:
+            return None
+        res = self.segmenter.segment(frame.rgb)
+        return Segmented(ClassLabels(res.labels, res.classes, res.dynamic_classes), res.dynamic_mask(),
+                         pixel_counts(res.labels, len(res.classes)))
 
-    def _remembered(self, mask: np.ndarray | None) -> np.ndarray | None:
+    def _remembered(self, mask: np.ndarray) -> np.ndarray:
         """The network's `mask` (H, W) bool or'ed with the last `memory_frames` ones, which it joins."""
-        if mask is None or not self.recent.maxlen:
+        if not self.recent.maxlen:
             return mask
         out = np.logical_or.reduce([mask, *self.recent])
         self.recent.append(mask)
         return out
 
     def process(self, frame: Frame, inputs: FrameInputs, ctx: StageContext) -> FrameInputs:
-        mask = inputs.prepared.get(self.name)
         if self.segmenter is None:
             if ctx.truth is None:
                 raise SequenceFormatError("segmentation.source 'truth' needs a sequence with truth/ masks",
                                           path=ctx.sequence.root if ctx.sequence is not None else None)
             mask = ctx.truth.mask(frame.index)
         else:
-            mask = self._remembered(mask if isinstance(mask, np.ndarray) else self.prepare(frame))
-        assert isinstance(mask, np.ndarray)
+            got = inputs.prepared.get(self.name)
+            seg = got if isinstance(got, Segmented) else self.prepare(frame)
+            assert seg is not None
+            if self.shares is None:
+                self.shares = ClassShares(seg.classes.classes, seg.classes.dynamic_classes)
+            self.shares.add(seg.counts)
+            inputs.class_labels = seg.classes
+            mask = self._remembered(seg.mask)
         inputs.potentially_dynamic = mask
         inputs.info["potentially_dynamic_fraction"] = float(mask.mean())
         return inputs
+
+    def summary(self) -> dict:
+        """The source; for the network its backend, classes, the potentially dynamic ones and the classes' mean
+        share of the frames (`ClassShares.summary`: the network's own masks, before `memory_frames` widens them)."""
+        if self.segmenter is None:
+            return {"source": "truth"}
+        shares = self.shares or ClassShares(self.segmenter.classes, self.segmenter.dynamic_classes)
+        return {"source": "network", "backend": self.backend, "classes": list(shares.classes),
+                "dynamic_classes": list(shares.dynamic), "frames": shares.frames, **shares.summary()}

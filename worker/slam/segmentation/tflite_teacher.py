@@ -2,7 +2,7 @@
 
 Understood model families, told apart by their output tensor:
 - (1, h, w, 21) float: DeepLabV3 PASCAL-VOC logits -> background / person (VOC 15) / chair (VOC 9), or all 21
-  VOC classes with `full_voc` (a multi-class MSNET's teacher);
+  VOC classes with `full_voc` (`SegmenterConfig.full_voc`; a multi-class MSNET's teacher);
 - (1, h, w) integer: a VOC class map (the quantised DeepLabV3) -> same classes, one-hot probabilities;
 - (1, h, w, 1) float: a person probability (MediaPipe selfie segmentation) -> background / person.
 """
@@ -14,7 +14,8 @@ import cv2
 import numpy as np
 
 from worker.slam.segmentation.base import SegmentationError, SegmentationResult, SegmenterConfig, check_rgb, labels_of
-from worker.slam.segmentation.classes import DEFAULT_DYNAMIC, VOC_CLASSES as VOC_NAMES
+from worker.slam.segmentation.classes import DEFAULT_DYNAMIC
+from worker.slam.segmentation.classes import VOC_CLASSES as VOC_NAMES
 
 VOC_CLASSES = 21
 # Our class -> PASCAL VOC index. Everything else in VOC counts as background.
@@ -60,7 +61,7 @@ class TfliteSegmenter:
             from worker.slam.errors import ConfigError
 
             raise ConfigError("the tflite-teacher backend needs model_path (a .tflite file)")
-        return cls(Path(config.model_path), config.threads or 1, config.dynamic_classes)
+        return cls(Path(config.model_path), config.threads or 1, config.dynamic_classes, config.full_voc)
 
     def _input(self, rgb: np.ndarray) -> np.ndarray:
         h, w = self.input_hw

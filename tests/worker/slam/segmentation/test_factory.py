@@ -36,7 +36,7 @@ def test_unknown_backend_and_missing_files() -> None:
 
 
 def test_msnet_backend_outputs_at_input_resolution(tiny_checkpoint: Path) -> None:
-    seg = make_segmenter(SegmenterConfig(checkpoint=str(tiny_checkpoint), device="cpu"))
+    seg = make_segmenter(SegmenterConfig(checkpoint=str(tiny_checkpoint), device="cpu", with_probs=True))
     assert isinstance(seg, Segmenter)
     assert seg.classes == ("background", "person", "chair") and seg.dynamic_classes == ("person", "chair")
     rgb = np.random.default_rng(0).integers(0, 255, (75, 101, 3), dtype=np.uint8)

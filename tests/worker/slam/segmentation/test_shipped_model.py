@@ -20,7 +20,7 @@ def test_shipped_checkpoint_runs_on_real_frame(shared: Path) -> None:
     rgb_path = next(folder.glob("rgb_*.png"), None)
     if rgb_path is None:
         pytest.skip(f"walking_xyz frame missing in {folder}")
-    res = make_segmenter(SegmenterConfig(device="cpu")).segment(read_rgb(rgb_path))
+    res = make_segmenter(SegmenterConfig(device="cpu", with_probs=True)).segment(read_rgb(rgb_path))
     assert res.labels.shape == (480, 640) and res.probs is not None and np.isfinite(res.probs).all()
 
 

@@ -50,14 +50,16 @@ class PyramidLevel(nn.Module):
                  grid: tuple[int, int]) -> None:
         super().__init__()
         self.down = conv_bn_act(c_in, c_out, 3, 2)
-        self.encoder = PEncoder(c_out, depth, patch, cfg.heads, cfg.mlp_ratio, cfg.dropout, grid)
-        self.fuse = conv_bn_act(2 * c_out, c_out, 1)
+        self.encoder = PEncoder(c_out, depth, patch, cfg.heads, cfg.mlp_ratio, cfg.dropout, grid) \
+            if cfg.pencoders else None
+        self.fuse = conv_bn_act(2 * c_out, c_out, 1) if cfg.pencoders else None
 
     def forward(self, c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """-> (C_next for the next level, the level's feature for C5): the same map here."""
         p = self.down(c)
-        c = p + self.fuse(torch.cat([self.encoder(p), p], dim=1))
-        return c, c
+        if self.encoder is not None and self.fuse is not None:
+            p = p + self.fuse(torch.cat([self.encoder(p), p], dim=1))
+        return p, p
 
 
 class StageLevel(nn.Module):
@@ -71,16 +73,21 @@ class StageLevel(nn.Module):
         super().__init__()
         self.stage = stage
         self.project = conv_bn_act(c_stage, width, 1)
-        self.encoder = PEncoder(width, depth, patch, cfg.heads, cfg.mlp_ratio, cfg.dropout, grid)
-        self.fuse = conv_bn_act(2 * width, width, 1)
+        # Without PEncoders (an ablation) the level is the stage and its projection for C5.
+        self.encoder = PEncoder(width, depth, patch, cfg.heads, cfg.mlp_ratio, cfg.dropout, grid) \
+            if cfg.pencoders else None
+        self.fuse = conv_bn_act(2 * width, width, 1) if cfg.pencoders else None
         scale = nn.BatchNorm2d(c_stage)
         nn.init.zeros_(scale.weight)
-        self.back = nn.Sequential(nn.Conv2d(width, c_stage, 1, bias=False), scale) if returns else None
+        self.back = nn.Sequential(nn.Conv2d(width, c_stage, 1, bias=False), scale) \
+            if returns and cfg.pencoders else None
 
     def forward(self, c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """-> (C_next (stage channels) for the next stage, Q (width channels) for C5)."""
         p = self.stage(c)
         q = self.project(p)
+        if self.encoder is None or self.fuse is None:
+            return p, q
         q = q + self.fuse(torch.cat([self.encoder(q), q], dim=1))
         return (p + self.back(q) if self.back is not None else p), q
 

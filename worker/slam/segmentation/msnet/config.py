@@ -39,6 +39,20 @@ class MsnetConfig:
     """The pyramid's convolutional path: "plain" = one 3x3 stride-2 conv per level from a two-conv stem (trained
     from scratch), "mobilenetv2" = the four stages of a width-0.5 MobileNetV2 (`msnet.mobilenet`; three levels,
     its weights can start from the Apache-2.0 DeepLabV3 teacher's), the PEncoders at `widths` beside them."""
+    class_head: str = "identity"
+    """How the decoder's queries (one per class) make the class scores. "identity": each query's distribution over
+    the classes, trained to be its own class (the checkpoints up to 2026-12-06: the same for every image).
+    "presence": each query's logit that its class is present in the image; a class's mask logits are raised by
+    log sigmoid(presence), so an absent class scores low everywhere (trained by a per-image presence loss)."""
+    pencoders: bool = True
+    """Ablation switch: False drops the PEncoders (the pyramid is its CNN path alone)."""
+    enhancement_filters: bool = True
+    """Ablation switch: False drops the per-class filters of the feature enhancement."""
+    guidance_attention: bool = True
+    """Ablation switch: False drops the guidance's channel and spatial attention (C5 goes to the upsampling as is)."""
+    decoder: bool = True
+    """Ablation switch: False drops the Transformer decoder: the class queries reach the heads unchanged, so the
+    masks come from fixed per-class embeddings (a 1x1 classifier) and presence is the same for every image."""
     refine_rank: int = 0
     """The guidance's 3x3 refinement of the stride-4 pixel embedding: 0 = a dense 3x3 conv (about a third of the
     forward on one CPU core), r >= 1 = depthwise 3x3 over r copies of the channels then a 1x1,
@@ -63,6 +77,8 @@ class MsnetConfig:
             raise ConfigError("the mobilenetv2 path has three levels (strides 8, 16, 32): give three widths")
         if not 0 <= self.refine_rank <= 9:  # an input channel's (out, 9) kernel slice has rank <= 9
             raise ConfigError(f"refine_rank must be in [0, 9], got {self.refine_rank}")
+        if self.class_head not in ("identity", "presence"):
+            raise ConfigError(f"class_head must be 'identity' or 'presence', got {self.class_head!r}")
         if not 0.0 <= self.dropout < 1.0:
             raise ConfigError(f"dropout must be in [0, 1), got {self.dropout}")
 

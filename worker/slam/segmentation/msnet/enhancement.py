@@ -34,20 +34,26 @@ class ClassQueryDecoder(nn.Module):
         d, m = cfg.embed_dim, cfg.num_classes
         h, w = cfg.input_size
         self.queries = nn.Parameter(torch.randn(1, m, d) * 0.02)
-        self.pos = nn.Parameter(torch.zeros(1, d, h // 8, w // 8))
-        nn.init.trunc_normal_(self.pos, std=0.02)
-        layer = nn.TransformerDecoderLayer(d, cfg.heads, int(d * cfg.mlp_ratio), cfg.dropout, activation="gelu",
-                                           batch_first=True, norm_first=True)
-        self.decoder = nn.TransformerDecoder(layer, cfg.decoder_layers, norm=nn.LayerNorm(d))
-        self.class_head = Mlp(d, d, m, cfg.dropout)
+        self.use_decoder = cfg.decoder
+        if cfg.decoder:
+            self.pos = nn.Parameter(torch.zeros(1, d, h // 8, w // 8))
+            nn.init.trunc_normal_(self.pos, std=0.02)
+            layer = nn.TransformerDecoderLayer(d, cfg.heads, int(d * cfg.mlp_ratio), cfg.dropout,
+                                               activation="gelu", batch_first=True, norm_first=True)
+            self.decoder = nn.TransformerDecoder(layer, cfg.decoder_layers, norm=nn.LayerNorm(d))
+        self.presence = cfg.class_head == "presence"
+        self.class_head = Mlp(d, d, 1 if self.presence else m, cfg.dropout)
         self.mask_head = Mlp(d, d, d, cfg.dropout)
 
     def forward(self, feat: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """feat (B, D, h, w) -> class logits (B, M, M) and mask embeddings (B, M, D)."""
+        """feat (B, D, h, w) -> class logits ((B, M, M), or (B, M) presence logits) and mask embeddings (B, M, D)."""
         b = feat.shape[0]
-        memory = (feat + resize_pos_embed(self.pos, (feat.shape[-2], feat.shape[-1]))).flatten(2).transpose(1, 2)
-        q = self.decoder(self.queries.expand(b, -1, -1), memory)
-        return self.class_head(q), self.mask_head(q)
+        q = self.queries.expand(b, -1, -1)
+        if self.use_decoder:
+            memory = (feat + resize_pos_embed(self.pos, (feat.shape[-2], feat.shape[-1]))).flatten(2).transpose(1, 2)
+            q = self.decoder(q, memory)
+        logits = self.class_head(q)
+        return (logits[..., 0] if self.presence else logits), self.mask_head(q)
 
 
 class FeatureEnhancement(nn.Module):
@@ -55,7 +61,8 @@ class FeatureEnhancement(nn.Module):
 
     def __init__(self, cfg: MsnetConfig) -> None:
         super().__init__()
-        self.filters = PerClassFilters(cfg.embed_dim, cfg.num_classes, cfg.filters_per_class)
+        self.filters: nn.Module = PerClassFilters(cfg.embed_dim, cfg.num_classes, cfg.filters_per_class) \
+            if cfg.enhancement_filters else nn.Identity()
         self.decoder = ClassQueryDecoder(cfg)
 
     def forward(self, c5: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

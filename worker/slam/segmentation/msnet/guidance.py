@@ -36,18 +36,21 @@ class SpatialAttention(nn.Module):
 
 class FeatureGuidance(nn.Module):
     """(enhanced C5 (B, D, H/8, W/8), C1 (B, S, H/4, W/4)) -> pixel embedding (B, D, H/4, W/4).
-    `refine_rank`: 0 = dense 3x3 refinement, r >= 1 = its rank-r separable stand-in (`MsnetConfig.refine_rank`)."""
+    `refine_rank`: 0 = dense 3x3 refinement, r >= 1 = its rank-r separable stand-in (`MsnetConfig.refine_rank`).
+    `attention` False (an ablation) passes the enhanced C5 to the upsampling without the two attentions."""
 
-    def __init__(self, dim: int, skip_channels: int, refine_rank: int = 0) -> None:
+    def __init__(self, dim: int, skip_channels: int, refine_rank: int = 0, attention: bool = True) -> None:
         super().__init__()
-        self.channel = ChannelAttention(dim)
-        self.spatial = SpatialAttention()
-        self.merge = conv_bn_act(2 * dim, dim, 1)
+        self.attention = attention
+        if attention:
+            self.channel = ChannelAttention(dim)
+            self.spatial = SpatialAttention()
+            self.merge = conv_bn_act(2 * dim, dim, 1)
         self.skip = conv_bn_act(skip_channels, dim, 1)
         self.refine = separable_conv_bn_act(dim, dim, refine_rank) if refine_rank else conv_bn_act(dim, dim, 3)
         self.embed = nn.Conv2d(dim, dim, 1)
 
     def forward(self, feat: torch.Tensor, c1: torch.Tensor) -> torch.Tensor:
-        dense = self.merge(torch.cat([self.channel(feat), self.spatial(feat)], dim=1))
+        dense = self.merge(torch.cat([self.channel(feat), self.spatial(feat)], dim=1)) if self.attention else feat
         up = F.interpolate(dense, size=c1.shape[-2:], mode="bilinear", align_corners=False)
         return self.embed(self.refine(up + self.skip(c1)))

@@ -1,5 +1,9 @@
-"""Segmentation head: the pixel embedding is multiplied by the mask head (one mask per query), the masks by the
-class head (each query's class distribution), then upsampled to the network's input size."""
+"""Segmentation head: the pixel embedding is multiplied by the mask head (one mask per query), the masks are
+turned into class logits by the class head, then upsampled to the network's input size.
+
+Two class heads (`MsnetConfig.class_head`): "identity" mixes the masks with each query's class distribution;
+"presence" keeps query k's mask as class k's logits and adds log sigmoid(presence_k), so a class the decoder finds
+absent from the image is suppressed everywhere (the background, index 0, is never gated)."""
 from __future__ import annotations
 
 import torch
@@ -7,19 +11,39 @@ import torch.nn.functional as F
 from torch import nn
 
 
-def grid_logits(pixel: torch.Tensor, class_probs: torch.Tensor, mask_embed: torch.Tensor) -> torch.Tensor:
-    """(pixel embedding (B, D, h, w), class distributions (B, Q, K), mask embeddings (B, Q, D)) -> logits
-    (B, K, h, w) on the embedding's grid, before the upsampling."""
+def query_masks(pixel: torch.Tensor, mask_embed: torch.Tensor) -> torch.Tensor:
+    """(pixel embedding (B, D, h, w), mask embeddings (B, Q, D)) -> mask logits (B, Q, h, w)."""
     # Scaled dot product keeps mask logits O(1) at init whatever the embedding width.
-    masks = torch.einsum("bqd,bdhw->bqhw", mask_embed, pixel) / pixel.shape[1] ** 0.5
+    return torch.einsum("bqd,bdhw->bqhw", mask_embed, pixel) / pixel.shape[1] ** 0.5
+
+
+def grid_logits(pixel: torch.Tensor, class_probs: torch.Tensor, mask_embed: torch.Tensor) -> torch.Tensor:
+    """The "identity" head: (pixel embedding (B, D, h, w), class distributions (B, Q, K), mask embeddings
+    (B, Q, D)) -> logits (B, K, h, w) on the embedding's grid, before the upsampling."""
     # Linear in the masks, so the result is a logit map usable with cross-entropy directly.
-    return torch.einsum("bqk,bqhw->bkhw", class_probs, masks)
+    return torch.einsum("bqk,bqhw->bkhw", class_probs, query_masks(pixel, mask_embed))
+
+
+def presence_logits(pixel: torch.Tensor, presence: torch.Tensor, mask_embed: torch.Tensor) -> torch.Tensor:
+    """The "presence" head: (pixel embedding (B, D, h, w), presence logits (B, K), mask embeddings (B, K, D)) ->
+    logits (B, K, h, w): class k's mask logits + log sigmoid(presence_k), the background's ungated."""
+    gate = F.logsigmoid(presence)
+    gate = torch.cat([torch.zeros_like(gate[:, :1]), gate[:, 1:]], dim=1)
+    return query_masks(pixel, mask_embed) + gate[:, :, None, None]
 
 
 class ClassMaskHead(nn.Module):
-    """(pixel embedding (B, D, h, w), class logits (B, Q, K), mask embeddings (B, Q, D)) -> logits (B, K, H, W)."""
+    """(pixel embedding (B, D, h, w), class logits ((B, Q, K) "identity" or (B, K) "presence"), mask embeddings
+    (B, Q, D)) -> logits (B, K, H, W)."""
+
+    def __init__(self, kind: str = "identity") -> None:
+        super().__init__()
+        self.kind = kind
 
     def forward(self, pixel: torch.Tensor, class_logits: torch.Tensor, mask_embed: torch.Tensor,
                 out_size: tuple[int, int]) -> torch.Tensor:
-        logits = grid_logits(pixel, class_logits.softmax(-1), mask_embed)
+        if self.kind == "presence":
+            logits = presence_logits(pixel, class_logits, mask_embed)
+        else:
+            logits = grid_logits(pixel, class_logits.softmax(-1), mask_embed)
         return F.interpolate(logits, size=out_size, mode="bilinear", align_corners=False)

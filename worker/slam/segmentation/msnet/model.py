@@ -15,13 +15,13 @@ from worker.slam.segmentation.msnet.heads import ClassMaskHead
 
 class MsnetFeatures(NamedTuple):
     pixel: torch.Tensor  # (B, D, H/4, W/4) pixel embedding
-    class_logits: torch.Tensor  # (B, M, M) query q's logits over the M classes
+    class_logits: torch.Tensor  # (B, M, M) query q's logits over the M classes, or (B, M) presence logits
     mask_embed: torch.Tensor  # (B, M, D)
 
 
 class MsnetOutput(NamedTuple):
     logits: torch.Tensor  # (B, M, H, W) per-class logits at the input size
-    class_logits: torch.Tensor  # (B, M, M); trained so that query q predicts class q
+    class_logits: torch.Tensor  # "identity": (B, M, M), query q trained to predict class q; "presence": (B, M)
 
 
 class MSNet(nn.Module):
@@ -35,8 +35,8 @@ class MSNet(nn.Module):
         self.cfg = cfg
         self.backbone = DualPyramidBackbone(cfg)
         self.enhancement = FeatureEnhancement(cfg)
-        self.guidance = FeatureGuidance(cfg.embed_dim, cfg.stem_channels, cfg.refine_rank)
-        self.head = ClassMaskHead()
+        self.guidance = FeatureGuidance(cfg.embed_dim, cfg.stem_channels, cfg.refine_rank, cfg.guidance_attention)
+        self.head = ClassMaskHead(cfg.class_head)
         # Inputs are uint8-derived RGB in [0, 1]: ImageNet statistics, or [-1, 1] as the MobileNetV2 was trained.
         mean, std = ([0.5] * 3, [0.5] * 3) if cfg.cnn == "mobilenetv2" else ([0.485, 0.456, 0.406],
                                                                              [0.229, 0.224, 0.225])

@@ -6,7 +6,9 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from worker.slam.augment.movers import COCO80
 from worker.slam.errors import ConfigError
+from worker.slam.segmentation.classes import COCO_TO_VOC, DEFAULT_DYNAMIC, VOC_CLASSES
 from worker.slam.segmentation.msnet.config import MsnetConfig
 
 
@@ -29,6 +31,15 @@ class TrainConfig:
     mask_dirs: tuple[tuple[str, str], ...] = ()
     """(folder, class) mask folders (`images/` + `masks/`, one labelled main subject per image: CCP). Split by
     `datasets.hash_split`: a fixed share of them is the test split and never trained on."""
+    synth_seeds: tuple[int, ...] = ()
+    """Seeds of synthetic rooms (`vtdslam synth`) whose walkers' exact masks are person training labels
+    (`train.synthetic`); keep them apart from the benchmark's seeds 0-3."""
+    synth_frames: int = 240
+    """Frames rendered per synthetic room."""
+    synth_people: int = 3
+    """Walkers per synthetic room."""
+    synth_stride: int = 4
+    """Every n-th synthetic frame is a training image."""
     mask_test_fraction: float = 0.25
     """Share of each mask folder's images (by a seeded hash of the file name) held out as its test split."""
     mask_val_fraction: float = 0.1
@@ -81,6 +92,10 @@ class TrainConfig:
     init_pretrained: str | None = None
     """A float DeepLabV3-MobileNetV2 .tflite (Apache-2.0) whose MobileNetV2 weights start the pyramid's CNN path
     when `model.cnn` is "mobilenetv2" (the rest starts random). Ignored with `init_weights` or on resume."""
+    init_partial: str | None = None
+    """Start every parameter whose name and shape match from this MSNET checkpoint (e.g. the shipped person network
+    for a multi-class model: its backbone and guidance; the class-sized layers and whatever the architecture adds
+    start as `init_pretrained` or random). Its CNN path then trains at `pretrained_lr_scale`. Ignored on resume."""
     pretrained_lr_scale: float = 1.0
     """Learning rate of the `init_pretrained` layers relative to `lr` (below 1 keeps them nearer their start)."""
     out_dir: str = "runs/msnet"
@@ -209,7 +224,20 @@ def presets() -> dict[str, TrainConfig]:
     # and not shipped: held-out COCO slightly worse (MODEL_CARD.md).
     cpu_real_mnv2_neg = replace(cpu_real_mnv2, time_budget_min=35.0, lr=3e-4, warmup_fraction=0.02, seed=1,
                                 init_pretrained=None, person_free_weight=4.0)
+    # Issue 57: the 21 PASCAL VOC classes (COCO128's polygons of the 20 VOC classes, both teachers' 21-class
+    # probabilities, cut-outs of every class pasted on the kitchen), people of six synthetic rooms with their exact
+    # masks, and class queries that decide per image which classes are present. Started (`--init-partial`) from
+    # the `cpu-real-mnv2` person network: its backbone and guidance carry over, the class-sized layers start fresh.
+    cpu_voc = replace(cpu_real_mnv2, time_budget_min=60.0, lr=8e-4, warmup_fraction=0.03, seed=0,
+                      model=replace(cpu_real_mnv2.model, classes=VOC_CLASSES, dynamic_classes=DEFAULT_DYNAMIC,
+                                    class_head="presence"),
+                      yolo_class_ids={voc: COCO80.index(coco) for coco, voc in COCO_TO_VOC.items()},
+                      coco_names=dict(COCO_TO_VOC),
+                      class_weights=tuple(2.0 if c == "person" else 1.0 for c in VOC_CLASSES), query_weight=0.5,
+                      p_chair_paste=0.45, chair_height=(0.15, 0.7), synth_seeds=tuple(range(100, 106)),
+                      synth_stride=8, cache_dir="/tmp/msnet_cache_voc")
     return {
+        "cpu-voc": cpu_voc,
         "cpu-real-mnv2": cpu_real_mnv2,
         "cpu-real-mnv2-neg": cpu_real_mnv2_neg,
         "cpu-real": cpu_real,

@@ -25,6 +25,7 @@ from worker.slam.segmentation.train.datasets import (
     split_holdout,
 )
 from worker.slam.segmentation.train.mixture import MixtureDataset, SoftSet
+from worker.slam.segmentation.train.synthetic import synthetic_people
 from worker.slam.segmentation.train.teacher_cache import ensemble_soft_labels
 
 #: Never trained on, whatever a config says: the evaluation-only sets stand for footage the product has never seen
@@ -151,6 +152,7 @@ def build_cutouts(cfg: TrainConfig, items: list[LabelledImage]) -> list[Cutout]:
 
 def build_training_data(cfg: TrainConfig) -> TrainingData:
     train, val, held = split_labelled(cfg)
+    train = train + synthetic_people(cfg)
     backgrounds = find_backgrounds(cfg)
     target_paths = expand(cfg, cfg.target_frames)
     if not train and not backgrounds:

@@ -36,6 +36,8 @@ class LabelledImage:
     mask: Path | None = None
     """A binary mask PNG (> 127 = `mask_label`) instead of polygons."""
     mask_label: str = "person"
+    mask_min: int = 128
+    """Mask pixels >= this are the labelled object (128 for 0/255 masks, 1 for id maps such as synthetic truth)."""
     partial: bool = False
     """Only the main subject is labelled (CCP): other pixels of its class may be unlabelled, so the background
     is not a certain negative where a teacher sees that class."""
@@ -148,7 +150,7 @@ def read_mask(item: LabelledImage) -> np.ndarray:
     m = cv2.imread(str(item.mask), cv2.IMREAD_GRAYSCALE)
     if m is None:
         raise SequenceFormatError("not a decodable mask image", path=item.mask)
-    return (m > 127).astype(np.uint8)
+    return (m >= item.mask_min).astype(np.uint8)
 
 
 def object_masks(item: LabelledImage, classes: tuple[str, ...]) -> list[tuple[np.ndarray, int]]:

@@ -69,11 +69,13 @@ class MixtureDataset(Dataset):
         a = random_affine(rng, rgb.shape[:2], self.out_hw, (0.8, 1.6))
         img = warp(rgb, a, self.out_hw)
         hard = warp(semantic_mask(item, self.classes), a, self.out_hw, nearest=True, border=IGNORE)
+        if item.mask is not None and not item.partial:
+            return img, hard, None, a  # an exact mask of every object (synthetic truth): nothing to distil
         soft = self._soft(self.labelled_soft, k, a, rgb.shape[:2])
-        if item.partial and soft is not None and item.mask_label in self.classes:
-            # Only the main subject is labelled: a bystander the teacher sees is no certain negative.
-            c = self.classes.index(item.mask_label)
-            hard[(hard == 0) & (soft[..., c] > 127)] = IGNORE
+        if item.partial and soft is not None:
+            # Only the main subject is labelled: whatever else the teacher sees (a bystander, a car in a street
+            # photo) is no certain background.
+            hard[(hard == 0) & (soft[..., 0] < 128)] = IGNORE
         return img, hard, soft, a
 
     def _target(self, rng: np.random.Generator):

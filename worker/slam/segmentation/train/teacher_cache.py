@@ -47,7 +47,10 @@ def soft_labels(teacher: Path, images: list[Path], classes: tuple[str, ...], cac
     for i, img in enumerate(tqdm(images, desc=f"teacher {teacher.stem}", unit="img", disable=None)):
         p = seg.predict_probs(read_rgb(img))
         if grid is not None and p.shape[:2] != grid:
-            p = cv2.resize(p, (grid[1], grid[0]), interpolation=cv2.INTER_AREA)
+            # INTER_AREA takes at most 4 channels at a time (21 for a VOC model)
+            p = np.concatenate([cv2.resize(np.ascontiguousarray(p[..., c:c + 4]), (grid[1], grid[0]),
+                                           interpolation=cv2.INTER_AREA).reshape(*grid, -1)
+                                for c in range(0, p.shape[-1], 4)], axis=-1)
         if out is None:
             out = np.zeros((len(images), *p.shape[:2], len(classes)), dtype=np.uint8)
         out[i][..., cols] = np.clip(np.round(p * 255.0), 0, 255).astype(np.uint8)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import random
 import time
 from dataclasses import dataclass, replace
@@ -29,6 +30,8 @@ from worker.slam.segmentation.train.data import TrainingData, build_training_dat
 from worker.slam.segmentation.train.datasets import LabelledImage, semantic_mask
 from worker.slam.segmentation.train.losses import msnet_loss
 from worker.slam.segmentation.train.mixture import EpochSampler, MixtureDataset, SoftSet
+
+_log = logging.getLogger(__name__)
 
 
 def seed_everything(seed: int) -> None:
@@ -123,7 +126,7 @@ def load_pretrained_cnn(model: MSNet, tflite: Path) -> None:
 
 def param_groups(model: MSNet, cfg: TrainConfig) -> list[dict]:
     """The pretrained CNN path at `pretrained_lr_scale` x the rate (when it starts pretrained), the rest at 1x."""
-    if not cfg.init_pretrained or cfg.init_weights or cfg.pretrained_lr_scale == 1.0:
+    if not (cfg.init_pretrained or cfg.init_partial) or cfg.init_weights or cfg.pretrained_lr_scale == 1.0:
         return [{"params": list(model.parameters()), "lr_scale": 1.0}]
     cnn = {id(p) for p in model.backbone.cnn_stages().parameters()}
     return [{"params": [p for p in model.parameters() if id(p) in cnn], "lr_scale": cfg.pretrained_lr_scale},
@@ -209,9 +212,26 @@ def _initial_model(cfg: TrainConfig, resume: bool, device: torch.device) -> MSNe
             raise ConfigError(f"init_weights {cfg.init_weights}: its architecture differs from the config's model")
         model.load_state_dict(start.state_dict())
         model.train()
-    elif cfg.init_pretrained and not (resume and (Path(cfg.out_dir) / "last.pt").is_file()):
-        load_pretrained_cnn(model, cfg.path(cfg.init_pretrained))
+    elif not (resume and (Path(cfg.out_dir) / "last.pt").is_file()):
+        if cfg.init_pretrained:
+            load_pretrained_cnn(model, cfg.path(cfg.init_pretrained))
+        if cfg.init_partial:
+            load_matching(model, cfg.path(cfg.init_partial))
     return model
+
+
+def load_matching(model: MSNet, checkpoint: Path) -> list[str]:
+    """Copy into `model` every tensor of `checkpoint` whose name and shape match; returns the names of the model's
+    tensors left as they were (logged in the run's config as what starts fresh)."""
+    start, _ = load_model(checkpoint)
+    theirs = start.state_dict()
+    ours = model.state_dict()
+    matched = {k: v for k, v in theirs.items() if k in ours and ours[k].shape == v.shape}
+    model.load_state_dict(matched, strict=False)
+    fresh = sorted(k for k in ours if k not in matched)
+    _log.info("init_partial: %d tensors from %s, %d start fresh: %s", len(matched), checkpoint.name, len(fresh),
+              ", ".join(sorted({k.rsplit(".", 2)[0] for k in fresh})))
+    return fresh
 
 
 def _restore(state_path: Path, model: MSNet, ema: AveragedModel | None, opt: torch.optim.Optimizer) -> _Clock:
