@@ -11,13 +11,13 @@ offline run.
 from __future__ import annotations
 
 import logging
-import time
-from concurrent.futures import Future, ThreadPoolExecutor
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from storage.live import FINISHING_STAGE, STREAMING_STAGE, LiveSpool, SpooledFrame, StreamEnd
+from storage.live import FINISHING_STAGE, STREAMING_STAGE, LiveSpool, SpooledFrame
+from worker.live_feed import Follower, LiveFeed, StreamEnded
 from worker.runner import CancelFn, Cancelled, ProgressFn, RunOutput
 from worker.snapshots import PartialWriter
 
@@ -34,14 +34,15 @@ class LiveConfig:
     """How often the spool is checked while no frame is waiting."""
     idle_timeout_s: float = 120.0
     """A stream that sent nothing (and did not end) for this long is ended by the worker (an api that died)."""
+    warm_up_runs: int = 2
+    """Runs of every stage's `prepare` (pure: the run's results do not change) on a synthetic frame of the camera's
+    size before the session is ready (0: none). The first calls load numba's cached kernels and let TorchScript
+    optimise MSNET: the first two frames took 454 and 100 ms instead of ~37 (Bonn, `no-restoration`), half a
+    second in which a 30 Hz stream has a dozen frames dropped; TorchScript optimises on its second run."""
 
 
 READY_STAGE = "waiting for frames"
 """The job's stage once the live runner is ready (a client streaming a recording may wait for it)."""
-
-
-class StreamEnded(Exception):
-    """The spool ended (or went silent) before the next frame."""
 
 
 def run_live_slam(sequence_dir: Path, camera: dict[str, Any], preset: str, overrides: dict[str, Any], out_dir: Path,
@@ -67,11 +68,18 @@ def run_live_slam(sequence_dir: Path, camera: dict[str, Any], preset: str, overr
     # the stages (the segmentation network) are built before the first frame is waited for: loading them
     # takes seconds, during which a stream would fall behind; rebuilt only if the frames are of another size
     stages = shipped_catalog().build_stages(config, cam)
-    follower = _Follower(LiveSpool(sequence_dir), live, should_cancel)
+    warm_up(stages, cam, live.warm_up_runs)
+    follower = Follower(LiveSpool(sequence_dir), live.max_behind, live.poll_s, live.idle_timeout_s)
     follower.skip_waiting()  # frames that came while the worker started are stale: counted as dropped
+
+    def check_cancel() -> bool:
+        if should_cancel():
+            raise Cancelled(f"cancelled after {follower.taken} frames of the live session")
+        return False
+
     progress(0, 0, READY_STAGE)
     try:
-        first = follower.next()
+        first = follower.next(check_cancel)
     except StreamEnded as exc:
         raise SequenceFormatError(f"the live session received no frame ({exc})") from None
     reader = _FrameReader(sequence_dir, cam)
@@ -79,103 +87,62 @@ def run_live_slam(sequence_dir: Path, camera: dict[str, Any], preset: str, overr
     if reader.camera is not cam:
         stages = shipped_catalog().build_stages(config, reader.camera)
     with PipelineRun(reader.camera, config, stages, on_step=snapshot) as run:
-        _follow(run, follower, reader, (first, frame), snapshot, progress)
-        progress(follower.processed, follower.received, FINISHING_STAGE)
+        processed = _follow(run, follower, reader, (first, frame), snapshot, progress, check_cancel)
+        progress(processed, follower.received, FINISHING_STAGE)
         run.sequence = Sequence(sequence_dir, reader.camera)  # complete now: its ground truth scores the run
         result = run.finish()
-    result.metrics.update({f"live_{k}": v for k, v in follower.counts().items()})
+    counts = follower.counts(processed)
+    result.metrics.update({f"live_{k}": v for k, v in counts.items()})
     result.metrics["live_end"] = follower.end.reason if follower.end else "unknown"
     write_outputs(result, config, Path(out_dir))
-    log.info("live session: %s", follower.counts())
+    log.info("live session: %s", counts)
     return RunOutput(metrics=result.metrics, config=config.to_dict(),
                      frame_stats=[FrameStats.from_row(r) for r in result.frame_stats])
 
 
-def _follow(run: Any, follower: _Follower, reader: _FrameReader, first: tuple[SpooledFrame, Any],
-            snapshot: PartialWriter | None, progress: ProgressFn) -> None:
-    """Step `run` through the session until the stream ends. While a frame runs, the next one waiting (if any)
-    is decoded on a reader thread and its stages' `prepare` work (the segmentation network) starts on another, as
-    the offline driver overlaps them (`worker.slam.run.driver`); each works in frame order."""
+def warm_up(stages: list[Any], camera: Any, runs: int) -> None:
+    """Every stage's `prepare` `runs` times on a textured frame (noise, depth 1.5 m) of `camera`'s size."""
+    import numpy as np
+
+    from worker.slam.io.sequence import Frame
+
+    if runs <= 0:
+        return
+    rng = np.random.default_rng(0)
+    h, w = camera.height, camera.width
+    frame = Frame(-1, 0.0, rng.integers(0, 256, (h, w, 3), dtype=np.uint8), np.full((h, w), 1.5, np.float32))
+    for stage in stages:
+        prepare = getattr(stage, "prepare", None)
+        if callable(prepare):
+            for _ in range(runs):
+                prepare(frame)
+
+
+def _follow(run: Any, follower: Follower, reader: _FrameReader, first: tuple[SpooledFrame, Any],
+            snapshot: PartialWriter | None, progress: ProgressFn, check_cancel: Callable[[], object]) -> int:
+    """Step `run` through the session until the stream ends. A feed thread takes the next frame as soon as it
+    has arrived and the run has room for it (`worker.live_feed`), decodes it and queues its stages' `prepare`
+    work (the segmentation network, the ORB features), each stage's on its own thread, as the offline driver
+    overlaps them (`worker.slam.run.driver`); each thread works in frame order, so results are those of running
+    the frames one after the other. Returns how many frames it stepped."""
     from worker.slam.io.prepare_ahead import PrepareAhead
 
     with PrepareAhead(run.stages.preparers()) as prep, \
-            ThreadPoolExecutor(1, thread_name_prefix="vtdslam-live-read") as pool:
-        def load(ref: SpooledFrame) -> tuple[SpooledFrame, Any]:
-            return ref, prep.submit(reader.read(ref))
-
-        ahead: Future[tuple[SpooledFrame, Any]] | None = None
+            LiveFeed(follower, lambda ref: (ref, prep.submit(reader.read(ref)))) as feed:
         ref, item = first[0], prep.submit(first[1])
+        processed = 0
         while True:
-            nxt = follower.take()  # already waiting: read it while this frame runs
-            if nxt is not None:
-                ahead = pool.submit(load, nxt)
             if snapshot is not None:
                 snapshot.arrival(ref.index, ref.arrival)
-                snapshot.counts.update(follower.counts())
+                snapshot.counts.update(follower.counts(processed + 1))
             run.step(item)
-            progress(follower.processed, follower.received, STREAMING_STAGE)
-            if ahead is None:
-                try:
-                    ahead = pool.submit(load, follower.next())
-                except StreamEnded:
-                    return
-            ref, item = ahead.result()
-            ahead = None
-
-
-class _Follower:
-    """The next frame to run: the oldest unprocessed one, unless more than ``max_behind`` wait (then the
-    newest ``max_behind``: the older ones are dropped)."""
-
-    def __init__(self, spool: LiveSpool, live: LiveConfig, should_cancel: CancelFn) -> None:
-        self.spool, self.live, self.should_cancel = spool, live, should_cancel
-        self.next_index = self.processed = self.dropped = 0
-        self.end: StreamEnd | None = None
-
-    @property
-    def received(self) -> int:
-        return self.spool.count()
-
-    def counts(self) -> dict[str, int]:
-        return {"frames_received": self.received, "frames_processed": self.processed,
-                "frames_dropped": self.dropped, "max_behind": self.live.max_behind}
-
-    def skip_waiting(self) -> None:
-        """Drop all but the newest ``max_behind`` frames received so far."""
-        n = self.spool.count()
-        if n - self.next_index > self.live.max_behind:
-            self.dropped += n - self.live.max_behind - self.next_index
-            self.next_index = n - self.live.max_behind
-
-    def take(self) -> SpooledFrame | None:
-        """The next frame if one is waiting (never blocks)."""
-        if self.spool.count() <= self.next_index:
-            return None
-        return self._pick()
-
-    def _pick(self) -> SpooledFrame:
-        self.skip_waiting()
-        frame = self.spool.frame(self.next_index)
-        self.next_index += 1
-        self.processed += 1
-        return frame
-
-    def next(self) -> SpooledFrame:
-        quiet_since = time.monotonic()
-        while True:
-            if self.should_cancel():
-                raise Cancelled(f"cancelled after {self.processed} frames of the live session")
-            n = self.spool.count()
-            if n > self.next_index:
-                return self._pick()
-            self.end = self.spool.ended()
-            if self.end is not None and self.spool.count() <= self.next_index:
-                raise StreamEnded(self.end.reason)
-            if time.monotonic() - quiet_since > self.live.idle_timeout_s:
-                self.end = self.spool.end(f"no frame for {self.live.idle_timeout_s:g} s", n)
-                log.warning("live session: %s; finishing with the frames received", self.end.reason)
-                raise StreamEnded(self.end.reason)
-            time.sleep(self.live.poll_s)
+            processed += 1
+            progress(processed, follower.received, STREAMING_STAGE)
+            check_cancel()
+            try:
+                ref, item = feed.get(check_cancel)
+            except StreamEnded:
+                return processed
 
 
 class _FrameReader:

@@ -3,7 +3,8 @@ the run as it goes (names: ``formats.artifacts.PARTIALS``), in its folder of the
 
 :class:`PartialWriter` is the pipeline run's ``on_step`` hook (``worker.slam.run.pipeline_run.StepFn``). After
 every frame it rewrites ``partial.json`` (the latest frames' index, timestamp, arrival, position, the counts: a
-small file, how a live session's pose reaches the page); every ``interval_s`` it writes the trajectory and the
+small file, how a live session's pose reaches the page; written on its own thread, newest first:
+``worker.latest_file``); every ``interval_s`` it writes the trajectory and the
 keyframes so far (TUM), the map so far (each keyframe's points back-projected once from its dense copy and moved
 to the keyframe's current pose; the sparse map's points when the run keeps no dense copies) and the frame with
 its masks, coloured by segmentation class (the classes and their colours in partial.json's `frame_legend`):
@@ -27,6 +28,7 @@ from formats import artifacts
 from formats.class_palette import class_overlay, legend, present_classes
 from formats.ply import write_ply
 from storage.artifacts import ArtifactStore
+from worker.latest_file import LatestFile
 
 if TYPE_CHECKING:
     from worker.slam.io.sequence import Frame
@@ -50,7 +52,10 @@ class SnapshotConfig:
     recent: int = 64
     """Frames listed in partial.json (a client polling less often than the frames come still sees each)."""
     background: bool = True
-    """Write the map, trajectory and images on a writer thread (False: on the pipeline thread, every snapshot)."""
+    """Write the map, trajectory and images on a writer thread, and partial.json on another (newest first: a
+    state superseded before it was written is skipped); False: all on the pipeline thread. Rewriting
+    partial.json after every frame cost the pipeline thread 3.3 ms a frame of a 30 Hz live session on the loaded
+    2-core VM (docs/results/realtime.md)."""
 
 
 @dataclass
@@ -99,6 +104,8 @@ class PartialWriter:
         """Time the snapshots took on the pipeline thread (the job's timings_ms["snapshots"], per frame)."""
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="vtdslam-snapshots") if self.config.background else None
         self._pending: Future[None] | None = None
+        self._state = (LatestFile(lambda data: self._put(artifacts.PARTIAL_STATE, data), self._failed,
+                                  "vtdslam-partial-state") if self.config.background else None)
         self.error: str | None = None
         """Why snapshots stopped being written (the run goes on; the job's metrics name it as a warning)."""
         self.legend: list[dict[str, Any]] | None = None
@@ -139,10 +146,13 @@ class PartialWriter:
     def write_state(self, **extra: Any) -> None:
         """partial.json, rewritten after every frame."""
         state = {"frames": self.frames, "tracked": self.tracked, "map_points": self.map_points, **self.counts, **extra,
-                 "updated": time.time(), "recent": list(self.recent)}
-        if self.legend is not None:
+                 "updated": time.time(), "recent": list(self.recent)}  # entries are never changed once listed
+        if self.legend is not None:  # replaced whole by the image writer, never changed in place
             state["frame_legend"] = self.legend
-        self._put(artifacts.PARTIAL_STATE, json.dumps(state).encode())
+        if self._state is not None:
+            self._state.put(lambda: json.dumps(state).encode())
+        else:
+            self._put(artifacts.PARTIAL_STATE, json.dumps(state).encode())
 
     def _put(self, name: str, data: bytes) -> None:
         """Write a snapshot file under a hidden name and rename it (readers never see half of one); no fsync: the
@@ -186,9 +196,12 @@ class PartialWriter:
         try:
             self._write(snap)
         except Exception as exc:  # noqa: BLE001 - as in __call__: the run goes on, the job's metrics say why
-            if self.error is None:
-                self.error = f"partial results not written: {type(exc).__name__}: {exc}"
-                log.warning("job %s: %s", self.job_id, self.error)
+            self._failed(exc)
+
+    def _failed(self, exc: Exception) -> None:
+        if self.error is None:
+            self.error = f"partial results not written: {type(exc).__name__}: {exc}"
+            log.warning("job %s: %s", self.job_id, self.error)
 
     def _write(self, snap: _Snapshot) -> None:
         self._put(artifacts.PARTIAL_TRAJECTORY, _tum(snap.stamps, snap.poses).encode())
@@ -234,10 +247,13 @@ class PartialWriter:
         return overlay
 
     def close(self) -> None:
-        """Wait for the snapshot being written (none is written after)."""
+        """Wait for the snapshot and the state being written (none is written after)."""
         if self._pool is not None:
             self._pool.shutdown(wait=True)
             self._pool = None
+        if self._state is not None:
+            self._state.close()
+            self._state = None
 
     def remove(self) -> None:
         """Drop the snapshot files (the job ended: its final artifacts, or nothing, replace them)."""

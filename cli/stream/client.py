@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import struct
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -71,6 +71,24 @@ def wait_ready(base: str, job_id: str, timeout_s: float = 300.0) -> None:
 def send(base: str, session: dict[str, Any], source: StreamSource, *, token: str | None = None,
          rate: float | None = None, on_frame: Callable[[int, float], None] | None = None) -> StreamReport:
     """Stream `source` into `session`: at the recorded timing, or `rate` frames per second when given."""
+    return send_frames(base, session, _paced(source, rate), source.groundtruth, token=token, on_frame=on_frame)
+
+
+def _paced(source: StreamSource, rate: float | None) -> Iterator[tuple[float, bytes, bytes]]:
+    """The source's frames, each read when it is due."""
+    t0_src, t0 = source.frames[0][0], time.monotonic()
+    for i, (t, rgb, depth) in enumerate(source.frames):
+        due = t0 + (i / rate if rate else t - t0_src)
+        time.sleep(max(0.0, due - time.monotonic()))
+        yield t, rgb.read_bytes(), depth.read_bytes()
+
+
+def send_frames(base: str, session: dict[str, Any], frames: Iterable[tuple[float, bytes, bytes]],
+                groundtruth: str | None = None, *, token: str | None = None,
+                on_frame: Callable[[int, float], None] | None = None) -> StreamReport:
+    """Send `frames` ((timestamp s, colour bytes, depth bytes), each as soon as the iterable gives it: a source
+    paces itself) into `session`, then the ground truth if any, then the end. Ctrl-C ends the stream early: the
+    frames sent are kept by the session."""
     from websockets.sync.client import connect
 
     ws_url = base.rstrip("/").replace("http://", "ws://", 1).replace("https://", "wss://", 1) + session["stream_url"]
@@ -79,20 +97,20 @@ def send(base: str, session: dict[str, Any], source: StreamSource, *, token: str
         hello = json.loads(ws.recv(timeout=30))
         if hello.get("type") != "ready":
             raise StreamError(f"the server refused the stream: {hello.get('error', hello)}")
-        t0_src, t0 = source.frames[0][0], time.monotonic()
-        for i, (t, rgb, depth) in enumerate(source.frames):
-            due = t0 + (i / rate if rate else t - t0_src)
-            time.sleep(max(0.0, due - time.monotonic()))
-            ws.send(encode_frame(t, rgb.read_bytes(), depth.read_bytes()))
-            report.sent += 1
-            report.sent_at.append(time.time())
-            if on_frame is not None:
-                on_frame(i, t)
-            if (early := _poll(ws)) is not None:  # refused a frame or ended by the server
-                report.ended = early
-                return report
-        if source.groundtruth:
-            ws.send(json.dumps({"type": "groundtruth", "text": source.groundtruth}))
+        try:
+            for i, (t, rgb, depth) in enumerate(frames):
+                ws.send(encode_frame(t, rgb, depth))
+                report.sent += 1
+                report.sent_at.append(time.time())
+                if on_frame is not None:
+                    on_frame(i, t)
+                if (early := _poll(ws)) is not None:  # refused a frame or ended by the server
+                    report.ended = early
+                    return report
+        except KeyboardInterrupt:
+            pass  # the end below keeps what was sent
+        if groundtruth:
+            ws.send(json.dumps({"type": "groundtruth", "text": groundtruth}))
         ws.send(json.dumps({"type": "end"}))
         report.ended = json.loads(ws.recv(timeout=60))
     return report

@@ -1,11 +1,13 @@
-"""Per-frame work that depends on the frame alone, run on one background thread ahead of the frame's turn.
+"""Per-frame work that depends on the frame alone, run on background threads ahead of the frame's turn.
 
-A stage's `prepare(frame)` (segmentation: the network's mask from the RGB) needs nothing from earlier frames,
-so it can run while the pipeline thread culls and tracks the frame before. The overlap is limited by the GIL:
-MSNET's forward pass releases it only in part, so on two loaded cores no fps gain was seen
-(docs/results/realtime.md, "Pipelined worker: segmentation ahead, restoration on demand").
-One thread, fed in frame order: each result is what the pipeline thread
-would have computed (the same function on the same frame), and a model is never called by two threads at once.
+A stage's `prepare(frame)` (segmentation: the network's mask from the RGB; culling: the frame's ORB features)
+needs nothing from earlier frames, so it can run while the pipeline thread culls and tracks the frame before.
+Each stage's `prepare` has its own thread, so the segmentation of a frame and its ORB extraction run side by
+side (both release the GIL in their native code) instead of one after the other: on one thread their sum was the
+slowest lane of a live session (docs/results/realtime.md). The overlap is limited by the GIL: MSNET's forward
+pass releases it only in part (same file, "Pipelined worker: segmentation ahead, restoration on demand").
+Each thread is fed in frame order: each result is what the pipeline thread would have computed (the same
+function on the same frame), and a model is never called by two threads at once.
 Each result comes with its compute time, so the pipeline reports the stage's cost and, apart from it, how long
 it waited for the result.
 """
@@ -37,16 +39,18 @@ def _timed(fn: Callable[[Frame], object], frame: Frame) -> tuple[object, float]:
 
 
 class PrepareAhead:
-    """`submit(frame)` queues every `prepare` function on the frame; with none, no thread is started.
+    """`submit(frame)` queues every `prepare` function on the frame, each on its own thread; with none, no thread
+    is started.
 
-    Use as a context manager: leaving it cancels what has not started and waits for the one running (at most one
-    frame's work), so an error or a cancellation in the consumer stops the thread. Submitting is thread-safe
+    Use as a context manager: leaving it cancels what has not started and waits for what runs (at most one
+    frame's work per stage), so an error or a cancellation in the consumer stops the threads. Submitting is thread-safe
     (the read-ahead thread submits the frames it has decoded).
     """
 
     def __init__(self, prepare: Mapping[str, Callable[[Frame], object]]) -> None:
         self._prepare = dict(prepare)
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix=THREAD_NAME) if self._prepare else None
+        self._pools = {name: ThreadPoolExecutor(1, thread_name_prefix=f"{THREAD_NAME}-{name}")
+                       for name in self._prepare}
 
     @property
     def names(self) -> list[str]:
@@ -54,9 +58,8 @@ class PrepareAhead:
         return list(self._prepare)
 
     def submit(self, frame: Frame) -> Prepared:
-        if self._pool is None:
-            return Prepared(frame)
-        return Prepared(frame, {name: self._pool.submit(_timed, fn, frame) for name, fn in self._prepare.items()})
+        return Prepared(frame, {name: self._pools[name].submit(_timed, fn, frame)
+                                for name, fn in self._prepare.items()})
 
     def __enter__(self) -> PrepareAhead:
         return self
@@ -66,5 +69,7 @@ class PrepareAhead:
         self.close()
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+        for pool in self._pools.values():  # every queue cancelled first, then each thread waited for
+            pool.shutdown(wait=False, cancel_futures=True)
+        for pool in self._pools.values():
+            pool.shutdown(wait=True)
