@@ -8,13 +8,10 @@ from __future__ import annotations
 
 from types import MappingProxyType
 
+from formats.class_names import VOC_CLASSES
 from worker.slam.errors import ConfigError
 
-#: PASCAL VOC classes in the teacher's index order (index 0 = background).
-VOC_CLASSES: tuple[str, ...] = (
-    "background", "aeroplane", "bicycle", "bird", "boat", "bottle", "bus", "car", "cat", "chair", "cow",
-    "diningtable", "dog", "horse", "motorbike", "person", "pottedplant", "sheep", "sofa", "train", "tvmonitor",
-)
+__all__ = ["COCO_TO_VOC", "DEFAULT_DYNAMIC", "DYNAMIC_GROUPS", "VOC_CLASSES", "resolve_dynamic"]
 
 #: COCO-80 name -> VOC name, for the COCO classes VOC has (the other 60 count as background).
 COCO_TO_VOC = MappingProxyType({

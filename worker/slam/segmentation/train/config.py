@@ -6,7 +6,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from worker.slam.augment.movers import COCO80
+from formats.class_names import COCO_CLASSES
 from worker.slam.errors import ConfigError
 from worker.slam.segmentation.classes import COCO_TO_VOC, DEFAULT_DYNAMIC, VOC_CLASSES
 from worker.slam.segmentation.msnet.config import MsnetConfig
@@ -231,7 +231,7 @@ def presets() -> dict[str, TrainConfig]:
     cpu_voc = replace(cpu_real_mnv2, time_budget_min=60.0, lr=8e-4, warmup_fraction=0.03, seed=0,
                       model=replace(cpu_real_mnv2.model, classes=VOC_CLASSES, dynamic_classes=DEFAULT_DYNAMIC,
                                     class_head="presence"),
-                      yolo_class_ids={voc: COCO80.index(coco) for coco, voc in COCO_TO_VOC.items()},
+                      yolo_class_ids={voc: COCO_CLASSES.index(coco) for coco, voc in COCO_TO_VOC.items()},
                       coco_names=dict(COCO_TO_VOC),
                       class_weights=tuple(2.0 if c == "person" else 1.0 for c in VOC_CLASSES), query_weight=0.5,
                       p_chair_paste=0.45, chair_height=(0.15, 0.7), synth_seeds=tuple(range(100, 106)),
