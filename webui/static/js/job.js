@@ -201,6 +201,8 @@
     let artifacts = [];
     try { artifacts = await api(`/jobs/${jobId}/artifacts`); } catch (err) { showError($("job-error"), err, "Could not list the outputs"); }
     const names = new Set(artifacts.map((a) => a.name));
+    // the results replace the "While it runs" card (live.js polls on its own clock and may not have seen the end)
+    if ($("live-card")) $("live-card").hidden = true;
     $("results").hidden = false;
     downloads(artifacts);
     if (job.status !== "succeeded") {

@@ -42,7 +42,8 @@
   async function poll() {
     try {
       const p = await api(`/jobs/${jobId}/partial`);
-      if (TERMINAL.has(p.status)) { $("live-card").hidden = true; return; }
+      // done, or the results already on the page (job.js saw the end first): the card goes and polling stops
+      if (TERMINAL.has(p.status) || !$("results").hidden) { $("live-card").hidden = true; return; }
       if (p.status === "running") show(p);
     } catch (_) { /* the next poll tries again */ }
     setTimeout(poll, POLL_MS);
