@@ -28,6 +28,7 @@ from pathlib import Path
 
 import httpx
 import numpy as np
+from live_args import add_stream_args  # bench/, the script's own folder
 
 from cli.stream.client import create_session, send, wait_ready
 from cli.stream.source import tum_source
@@ -105,12 +106,7 @@ def _offline_ate(seq_dir: Path, camera: str, preset: str, out: Path) -> tuple[fl
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    shared = Path(os.environ.get("VTD_SHARED_DIR", "../shared"))
-    ap.add_argument("--seq", type=Path, default=shared / "data/bonn_crowd_dev")
-    ap.add_argument("--camera", default="bonn")
-    ap.add_argument("--preset", default="no-restoration")
-    ap.add_argument("--rate", type=float, default=30.0)
-    ap.add_argument("--max-frames", type=int, default=None)
+    add_stream_args(ap)
     ap.add_argument("--poll", type=float, default=0.1, help="Seconds between polls of the page's endpoint.")
     ap.add_argument("--no-offline", action="store_true", help="Skip the offline run of the same frames.")
     args = ap.parse_args()

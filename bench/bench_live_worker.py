@@ -22,6 +22,8 @@ from pathlib import Path
 
 sys.path.insert(0, os.getcwd())  # the checkout it is run from
 
+from live_args import add_stream_args  # noqa: E402 (bench/, the script's own folder)
+
 from cli.stream.source import tum_source  # noqa: E402
 from storage.artifacts import ArtifactStore  # noqa: E402
 from storage.live import LiveSpool, SpooledFrame  # noqa: E402
@@ -44,12 +46,7 @@ def _cpu_by_thread() -> dict[str, float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
-    shared = Path(os.environ.get("VTD_SHARED_DIR", "../shared"))
-    ap.add_argument("--seq", type=Path, default=shared / "data/bonn_crowd_dev")
-    ap.add_argument("--camera", default="bonn")
-    ap.add_argument("--preset", default="no-restoration")
-    ap.add_argument("--rate", type=float, default=30.0)
-    ap.add_argument("--max-frames", type=int, default=None)
+    add_stream_args(ap)
     args = ap.parse_args()
 
     src = tum_source(args.seq, args.max_frames)
