@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -50,25 +51,28 @@ def test_msnet_backend_outputs_at_input_resolution(tiny_checkpoint: Path) -> Non
 
 
 def test_msnet_backend_runs_a_trace_with_the_eager_models_outputs(tiny_checkpoint: Path) -> None:
-    """The segmenter's traced forward gives the logits of the (BN-folded) eager model bit for bit, on frames
-    unlike the zeros it was traced with, and its probabilities are their softmax."""
+    """The segmenter's traced forward gives the grid logits of the (BN-folded) eager model bit for bit, on frames
+    unlike the zeros it was traced with; its probabilities are the softmax of the eager model's upsampled logits,
+    and its labels (the fast path, from the grid) agree with their argmax but for a sliver along boundaries."""
     import torch
 
     from worker.slam.segmentation.msnet.segmenter import MsnetSegmenter
 
     seg = make_segmenter(SegmenterConfig(checkpoint=str(tiny_checkpoint), device="cpu"))
-    assert isinstance(seg, MsnetSegmenter) and isinstance(seg._forward, torch.jit.ScriptModule)
+    assert isinstance(seg, MsnetSegmenter) and isinstance(seg._grid, torch.jit.ScriptModule)
     rng = np.random.default_rng(1)
     for _ in range(3):
         rgb = rng.integers(0, 255, (120, 160, 3), dtype=np.uint8)
         x = torch.rand(1, 3, *TINY.input_size).contiguous(memory_format=torch.channels_last)
         with torch.inference_mode():
-            want, got = seg.model(x).logits, seg._forward(x)
+            want, got = seg.model.forward_grid(x), seg._grid(x)
         assert torch.equal(want, got) and want.abs().max() > 0
         probs = seg.predict_probs(rgb)
         with torch.inference_mode():
             eager = seg.model(_input(rgb, TINY.input_size)).logits.softmax(1)[0].permute(1, 2, 0).numpy()
         np.testing.assert_array_equal(probs, eager)
+        full = cv2.resize(probs, (160, 120), interpolation=cv2.INTER_LINEAR).argmax(-1)
+        assert (seg.segment(rgb).labels == full).mean() > 0.97
 
 
 def _input(rgb: np.ndarray, size: tuple[int, int]):

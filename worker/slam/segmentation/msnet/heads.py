@@ -40,10 +40,17 @@ class ClassMaskHead(nn.Module):
         super().__init__()
         self.kind = kind
 
+    def grid(self, pixel: torch.Tensor, class_logits: torch.Tensor, mask_embed: torch.Tensor) -> torch.Tensor:
+        """-> logits (B, K, h, w) on the pixel embedding's grid."""
+        if self.kind == "presence":
+            return presence_logits(pixel, class_logits, mask_embed)
+        return grid_logits(pixel, class_logits.softmax(-1), mask_embed)
+
     def forward(self, pixel: torch.Tensor, class_logits: torch.Tensor, mask_embed: torch.Tensor,
                 out_size: tuple[int, int]) -> torch.Tensor:
-        if self.kind == "presence":
-            logits = presence_logits(pixel, class_logits, mask_embed)
-        else:
-            logits = grid_logits(pixel, class_logits.softmax(-1), mask_embed)
-        return F.interpolate(logits, size=out_size, mode="bilinear", align_corners=False)
+        return upsample_logits(self.grid(pixel, class_logits, mask_embed), out_size)
+
+
+def upsample_logits(grid: torch.Tensor, out_size: tuple[int, int]) -> torch.Tensor:
+    """Grid logits (B, K, h, w) -> (B, K, H, W), bilinear: how the network's outputs reach its input size."""
+    return F.interpolate(grid, size=out_size, mode="bilinear", align_corners=False)

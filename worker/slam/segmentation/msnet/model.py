@@ -53,6 +53,11 @@ class MSNet(nn.Module):
         logits = self.head(feats.pixel, feats.class_logits, feats.mask_embed, out_size)
         return MsnetOutput(logits, feats.class_logits)
 
+    def forward_grid(self, x: torch.Tensor) -> torch.Tensor:
+        """x (B, 3, H, W) -> logits (B, M, H/4, W/4) on the pixel embedding's grid, before the upsampling."""
+        feats = self.forward_features(x)
+        return self.head.grid(feats.pixel, feats.class_logits, feats.mask_embed)
+
     def forward(self, x: torch.Tensor) -> MsnetOutput:
         return self.forward_head(self.forward_features(x), (x.shape[-2], x.shape[-1]))
 
