@@ -135,19 +135,29 @@ def main() -> None:
             wait_ready(base, job_id)
             viewer = threading.Timer(3.0, lambda: httpx.get(f"{base}/api/v1/jobs/{job_id}/viewer", timeout=30))
             viewer.start()  # the page opens the 3D viewer once the run has poses
+            before = _stream_cpu(serve.pid)
             t0 = time.monotonic()
             report = send(base, session, source, rate=args.rate)
             stream_s = time.monotonic() - t0
+            during = {r: c - before.get(r, 0.0) for r, c in _stream_cpu(serve.pid).items()}
             job = _wait_job(base, job_id)
             poller.stop.set()
             usage = [_usage(pid) for pid in _children(serve.pid)]
         finally:
             serve.send_signal(signal.SIGINT)
             serve.wait(60)
-        _report(args, source, report, stream_s, job, poller, usage, Path(tmp))
+        _report(args, source, report, stream_s, job, poller, usage, during, Path(tmp))
 
 
-def _report(args, source, report, stream_s, job, poller, usage, tmp: Path) -> None:  # noqa: ANN001
+def _stream_cpu(serve_pid: int) -> dict[str, float]:
+    """CPU seconds so far of each `vtdslam serve` child and of this process (the client and the page poller)."""
+    cpu = {role: c for role, _, c in (_usage(pid) for pid in _children(serve_pid))}
+    t = os.times()
+    cpu["bench (client + poller)"] = t.user + t.system
+    return cpu
+
+
+def _report(args, source, report, stream_s, job, poller, usage, during, tmp: Path) -> None:  # noqa: ANN001
     m = job.get("metrics") or {}
     page = np.array([1000 * (s - a) for s, a, _ in poller.seen.values() if a is not None])
     worker = np.array([1000 * (d - a) for _, a, d in poller.seen.values() if a is not None])
@@ -170,6 +180,8 @@ def _report(args, source, report, stream_s, job, poller, usage, tmp: Path) -> No
         ("peak memory api + worker + viewer (MB)",
          f"{sum(u[1] for u in usage):.0f} ({', '.join(f'{r} {p:.0f}' for r, p, _ in usage)})"),
         ("CPU seconds by process (whole session)", ", ".join(f"{r} {c:.1f}" for r, _, c in usage)),
+        ("CPU seconds by process while the frames were sent", ", ".join(f"{r} {c:.1f}" for r, c in during.items())
+         + f" of {2 * stream_s:.1f} on two cores"),
         ("ATE RMSE live (m)", _m(live_ate)),
         ("ATE RMSE offline, same frames (m)", _m(offline) + (f" ({offline_s:.0f} s)" if offline_s else "")),
         ("live / offline ATE", f"{live_ate / offline:.3f}" if live_ate and offline else "-"),

@@ -8,7 +8,9 @@ from backend.http_limits import KEEP_ALIVE_S, MAX_HEADER_BYTES, LimitedH11Protoc
 
 
 def api_config(host: str, port: int, **kwargs: object) -> uvicorn.Config:
-    """The api's uvicorn config: the app factory, h11 with header size and time limits, keep-alive."""
+    """The api's uvicorn config: the app factory, h11 with header size and time limits, keep-alive, WebSocket
+    messages uncompressed (a live session's frames are JPEG and PNG already: deflating them again cost its client
+    7 ms of CPU a frame for nothing, and the api as much to inflate them)."""
     return uvicorn.Config(
         "backend.app:create_app",
         factory=True,
@@ -17,6 +19,7 @@ def api_config(host: str, port: int, **kwargs: object) -> uvicorn.Config:
         http=LimitedH11Protocol,
         h11_max_incomplete_event_size=MAX_HEADER_BYTES,
         timeout_keep_alive=KEEP_ALIVE_S,
+        ws_per_message_deflate=False,
         **kwargs,  # type: ignore[arg-type]
     )
 

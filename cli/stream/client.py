@@ -93,7 +93,9 @@ def send_frames(base: str, session: dict[str, Any], frames: Iterable[tuple[float
 
     ws_url = base.rstrip("/").replace("http://", "ws://", 1).replace("https://", "wss://", 1) + session["stream_url"]
     report = StreamReport(session["job_id"], session["sequence_id"])
-    with connect(ws_url, additional_headers=_auth(token), max_size=2**24, open_timeout=30) as ws:
+    # no per-message deflate: the images are compressed already (deflating a 210 kB Bonn frame again cost 7 ms of
+    # CPU on each side, bench/bench_live.py)
+    with connect(ws_url, additional_headers=_auth(token), max_size=2**24, open_timeout=30, compression=None) as ws:
         hello = json.loads(ws.recv(timeout=30))
         if hello.get("type") != "ready":
             raise StreamError(f"the server refused the stream: {hello.get('error', hello)}")
