@@ -34,6 +34,11 @@ class LiveConfig:
     """How often the spool is checked while no frame is waiting."""
     idle_timeout_s: float = 120.0
     """A stream that sent nothing (and did not end) for this long is ended by the worker (an api that died)."""
+    frames_ahead: int = 2
+    """Frames taken, decoded and queued for their stages' `prepare` ahead of the one the pipeline steps (at least
+    1). With 2 the network works on the next frame while the one after is decoded: Bonn at 30 Hz through the
+    whole service dropped 7.3-10.8 % of frames (4 runs) against 8.6-13.7 % with 1 (5 runs), 7.0-7.6 % with 3
+    (docs/results/realtime.md); each frame ahead can add a frame's time to the delay when the run is behind."""
     warm_up_runs: int = 2
     """Runs of every stage's `prepare` (pure: the run's results do not change) on a synthetic frame of the camera's
     size before the session is ready (0: none). The first calls load numba's cached kernels and let TorchScript
@@ -87,7 +92,8 @@ def run_live_slam(sequence_dir: Path, camera: dict[str, Any], preset: str, overr
     if reader.camera is not cam:
         stages = shipped_catalog().build_stages(config, reader.camera)
     with PipelineRun(reader.camera, config, stages, on_step=snapshot) as run:
-        processed = _follow(run, follower, reader, (first, frame), snapshot, progress, check_cancel)
+        processed = _follow(run, follower, reader, (first, frame), snapshot, progress, check_cancel,
+                            live.frames_ahead)
         progress(processed, follower.received, FINISHING_STAGE)
         run.sequence = Sequence(sequence_dir, reader.camera)  # complete now: its ground truth scores the run
         result = run.finish()
@@ -119,7 +125,8 @@ def warm_up(stages: list[Any], camera: Any, runs: int) -> None:
 
 
 def _follow(run: Any, follower: Follower, reader: _FrameReader, first: tuple[SpooledFrame, Any],
-            snapshot: PartialWriter | None, progress: ProgressFn, check_cancel: Callable[[], object]) -> int:
+            snapshot: PartialWriter | None, progress: ProgressFn, check_cancel: Callable[[], object],
+            ahead: int) -> int:
     """Step `run` through the session until the stream ends. A feed thread takes the next frame as soon as it
     has arrived and the run has room for it (`worker.live_feed`), decodes it and queues its stages' `prepare`
     work (the segmentation network, the ORB features), each stage's on its own thread, as the offline driver
@@ -128,7 +135,7 @@ def _follow(run: Any, follower: Follower, reader: _FrameReader, first: tuple[Spo
     from worker.slam.io.prepare_ahead import PrepareAhead
 
     with PrepareAhead(run.stages.preparers()) as prep, \
-            LiveFeed(follower, lambda ref: (ref, prep.submit(reader.read(ref)))) as feed:
+            LiveFeed(follower, lambda ref: (ref, prep.submit(reader.read(ref))), ahead=ahead) as feed:
         ref, item = first[0], prep.submit(first[1])
         processed = 0
         while True:

@@ -2,9 +2,10 @@
 
 :class:`Follower` is the drop rule: the next frame is the oldest one not yet taken, unless more than
 ``max_behind`` wait (then the newest ``max_behind``; the older ones are dropped and counted). :class:`LiveFeed` takes
-frames on its own thread the moment the run has room for one more (at most one frame taken ahead of the one the
-run steps) and hands them over decoded, with their stages' `prepare` work already queued: while the pipeline
-thread tracks frame k, frame k+1 is decoded and segmented as soon as it has arrived, not only once frame k is done.
+frames on its own thread the moment the run has room for one more (at most ``ahead`` frames taken ahead of the one
+the run steps) and hands them over decoded, with their stages' `prepare` work already queued: while the pipeline
+thread tracks frame k, frames k+1 and k+2 are decoded and segmented as soon as they have arrived, not only once
+frame k is done.
 Frames are taken in arrival order and the drop rule is applied when a frame is taken, as the pipeline thread would.
 """
 from __future__ import annotations
@@ -86,8 +87,8 @@ class Follower:
 
 
 class LiveFeed(Generic[T]):
-    """``load(frame)`` of each frame the follower gives, on one background thread, one frame ahead of the
-    consumer: the next frame is taken (and loaded) once the consumer took the previous one and it has arrived.
+    """``load(frame)`` of each frame the follower gives, on one background thread, up to ``ahead`` frames ahead of
+    the consumer: a frame is taken (and loaded) once it has arrived and fewer than ``ahead`` wait for the consumer.
 
     ``get(should_cancel)`` blocks for the next loaded frame; it raises :class:`StreamEnded` after the last one, the
     error that taking or loading a frame raised at that frame, and (checking ``should_cancel`` on the calling
@@ -95,10 +96,13 @@ class LiveFeed(Generic[T]):
     ``should_cancel`` raises. Use as a context manager: leaving stops the thread.
     """
 
-    def __init__(self, follower: Follower, load: Callable[[SpooledFrame], T], poll_s: float = 0.05) -> None:
+    def __init__(self, follower: Follower, load: Callable[[SpooledFrame], T], poll_s: float = 0.05,
+                 ahead: int = 1) -> None:
+        if ahead < 1:
+            raise ValueError(f"ahead must be at least 1, got {ahead}")
         self.follower, self.load, self.poll_s = follower, load, poll_s
         self._out: queue.Queue[tuple[T | None, BaseException | None]] = queue.Queue()
-        self._room = threading.Semaphore(1)  # one frame taken ahead of the consumer's
+        self._room = threading.Semaphore(ahead)  # frames taken ahead of the consumer's
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="vtdslam-live-feed", daemon=True)
         self._thread.start()

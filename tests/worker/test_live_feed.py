@@ -1,4 +1,4 @@
-"""The live feed: frames taken in arrival order as they arrive, one ahead of the run, loaded on the feed thread;
+"""The live feed: frames taken in arrival order as they arrive, one or more ahead of the run, loaded on the feed thread;
 the drop rule applied when a frame is taken; errors, the end and a cancel reach the run at their frame; and a live
 run of a stream it keeps up with is the offline run of the same frames, bit for bit."""
 from __future__ import annotations
@@ -82,6 +82,32 @@ def test_one_frame_is_taken_ahead_and_the_oldest_waiting_are_dropped(tmp_path: P
     assert got == [1, 5, 6]  # 2, 3 and 4 were more than 2 behind when frame 5 was taken
     assert follower.dropped == 3 and follower.counts(4) == {
         "frames_received": 7, "frames_processed": 4, "frames_dropped": 3, "max_behind": 2}
+
+
+def test_two_frames_are_taken_ahead_when_asked_and_the_rest_wait_to_be_dropped(tmp_path: Path) -> None:
+    """`ahead=2` (the live runner's default): while the run is busy two frames are taken and loaded, the others
+    wait in the spool where the drop rule applies; one more is taken as soon as the run takes one."""
+    spool = _spool(tmp_path)
+    follower = _follower(spool, max_behind=2)
+    with LiveFeed(follower, lambda ref: ref.index, poll_s=0.01, ahead=2) as feed:
+        _add(spool, 0)
+        assert feed.get() == 0  # the run is now busy with frame 0
+        _add(spool, 1)
+        _add(spool, 2)
+        _wait(lambda: follower.taken == 3)  # frames 1 and 2 taken ahead as they arrive
+        for i in range(3, 8):  # 3..7 wait behind them
+            _add(spool, i)
+        time.sleep(0.05)
+        assert follower.taken == 3 and follower.dropped == 0
+        assert feed.get() == 1
+        _wait(lambda: follower.taken == 4)  # room for one more: 6 (3, 4, 5 were more than 2 behind)
+        got = [feed.get(), feed.get(), feed.get()]
+        spool.end("client ended the stream", 8)
+        with pytest.raises(StreamEnded):
+            feed.get()
+    assert got == [2, 6, 7] and follower.dropped == 3
+    with pytest.raises(ValueError, match="at least 1"):
+        LiveFeed(follower, lambda ref: ref.index, ahead=0)
 
 
 def test_a_load_error_is_raised_at_its_frame(tmp_path: Path) -> None:
