@@ -34,11 +34,13 @@ class LiveConfig:
     """How often the spool is checked while no frame is waiting."""
     idle_timeout_s: float = 120.0
     """A stream that sent nothing (and did not end) for this long is ended by the worker (an api that died)."""
-    frames_ahead: int = 2
+    frames_ahead: int = 3
     """Frames taken, decoded and queued for their stages' `prepare` ahead of the one the pipeline steps (at least
-    1). With 2 the network works on the next frame while the one after is decoded: Bonn at 30 Hz through the
-    whole service dropped 7.3-10.8 % of frames (4 runs) against 8.6-13.7 % with 1 (5 runs), 7.0-7.6 % with 3
-    (docs/results/realtime.md); each frame ahead can add a frame's time to the delay when the run is behind."""
+    1): the network and the ORB thread work on the next frames while the pipeline thread tracks, so neither idles
+    waiting for a frame to be decoded. Bonn at 30 Hz through the whole service (bench/bench_live.py, 2026-12-06):
+    with 1, 8.6-13.7 % of frames dropped (5 runs); with 2, 7.3-10.8 % (8 runs); with 3, 5.4-7.6 % (5 runs), the
+    median delay from arrival to pose on the page 211-244 ms against 207-217 ms with 2. A frame ahead can add a
+    frame's time to the delay while the run is behind (docs/results/realtime.md)."""
     warm_up_runs: int = 2
     """Runs of every stage's `prepare` (pure: the run's results do not change) on a synthetic frame of the camera's
     size before the session is ready (0: none). The first calls load numba's cached kernels and let TorchScript
