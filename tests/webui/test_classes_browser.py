@@ -7,12 +7,9 @@ from pathlib import Path
 from fastapi.testclient import TestClient
 
 from storage.settings import Settings
-from tests.e2e.conftest import (
-    CHROMIUM,
-    CHROMIUM_ARGS,
-    playwright_api,  # noqa: F401 (a fixture)
-)
-from tests.webui.test_metrics_labels_browser import TUM, _answer, _bonn_batch, client, settings  # noqa: F401
+from tests.e2e.conftest import playwright_api  # noqa: F401 (a fixture)
+from tests.webui.in_process import ORIGIN, app_page, client, finished_job, settings  # noqa: F401 (fixtures)
+from tests.webui.test_metrics_labels_browser import TUM
 
 SEGMENTATION = {
     "source": "network", "backend": "tflite-teacher", "classes": ["background", "person", "car", "sofa"],
@@ -30,32 +27,23 @@ CULLING = {"features_removed": 3, "truth": {"mask_iou": 0.5, "mask_recall_by_cla
 
 def test_the_job_page_lists_the_classes_in_their_colours(playwright_api, client: TestClient,  # noqa: F811
                                                          settings: Settings, tmp_path: Path) -> None:  # noqa: F811
-    job_id, _ = _bonn_batch(client, settings, tmp_path, {**TUM, "segmentation": SEGMENTATION, "culling": CULLING},
-                            "tum3")
-    errors: list[str] = []
-    with playwright_api.sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
-        try:
-            page = browser.new_page()
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.route("http://vtd.test/**", _answer(client))
-            page.goto(f"http://vtd.test/jobs/{job_id}")
-            card = page.locator("#classes-card")
-            playwright_api.expect(card).to_be_visible()
-            playwright_api.expect(card).to_contain_text("potentially dynamic: person, car")
-            items = page.locator("#classes-legend li")
-            assert items.all_inner_texts() == ["person", "car", "sofa (not masked)"]
-            swatch = page.locator("#classes-legend .swatch").first
-            assert swatch.evaluate("e => getComputedStyle(e).backgroundColor") == "rgb(192, 128, 128)"
-            share = page.locator("#class-share").inner_text()
-            assert "12.3 %" in share and "3.1 %" in share and "seen, not masked" in share
-            by_class = page.locator("#truth-by-class")
-            playwright_api.expect(by_class).to_contain_text("dog")
-            rows = by_class.locator("tbody tr").all_inner_texts()
-            assert rows[0].split("\t") == ["dog", "50.0 %", "25.0 %", "800"]
-            assert rows[1].split("\t") == ["person", "90.0 %", "80.0 %", "1000"]
-            swatches = by_class.locator("tbody tr td:first-child .swatch")
-            assert swatches.count() == 1  # person is in the run's legend, the dog (a class it lacks) is not
-        finally:
-            browser.close()
-    assert not errors, errors
+    job_id, _ = finished_job(client, settings, tmp_path, {**TUM, "segmentation": SEGMENTATION, "culling": CULLING},
+                             "tum3")
+    with app_page(playwright_api, client) as page:
+        page.goto(f"{ORIGIN}/jobs/{job_id}")
+        card = page.locator("#classes-card")
+        playwright_api.expect(card).to_be_visible()
+        playwright_api.expect(card).to_contain_text("potentially dynamic: person, car")
+        items = page.locator("#classes-legend li")
+        assert items.all_inner_texts() == ["person", "car", "sofa (not masked)"]
+        swatch = page.locator("#classes-legend .swatch").first
+        assert swatch.evaluate("e => getComputedStyle(e).backgroundColor") == "rgb(192, 128, 128)"
+        share = page.locator("#class-share").inner_text()
+        assert "12.3 %" in share and "3.1 %" in share and "seen, not masked" in share
+        by_class = page.locator("#truth-by-class")
+        playwright_api.expect(by_class).to_contain_text("dog")
+        rows = by_class.locator("tbody tr").all_inner_texts()
+        assert rows[0].split("\t") == ["dog", "50.0 %", "25.0 %", "800"]
+        assert rows[1].split("\t") == ["person", "90.0 %", "80.0 %", "1000"]
+        swatches = by_class.locator("tbody tr td:first-child .swatch")
+        assert swatches.count() == 1  # person is in the run's legend, the dog (a class it lacks) is not
