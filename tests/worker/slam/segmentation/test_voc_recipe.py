@@ -63,6 +63,7 @@ def test_synthetic_people_are_exactly_labelled(tmp_path: Path) -> None:
     assert all(i.image.is_file() and not i.partial for i in items)
     masks = [read_mask(i) for i in items]
     assert all(m.dtype == np.uint8 and set(np.unique(m)) <= {0, 1} for m in masks)
+    assert all(i.size == m.shape for i, m in zip(items, masks, strict=True))  # the room camera's (H, W)
     assert sum(int(m.sum()) for m in masks) > 0  # the walkers are in view
     mtime = items[0].image.stat().st_mtime_ns
     render_synthetic_rooms(cfg)  # rendered once, then read from the cache folder

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from worker.slam.camera import load_camera_file
 from worker.slam.errors import ConfigError
 from worker.slam.segmentation.train.config import TrainConfig
 from worker.slam.segmentation.train.datasets import LabelledImage
@@ -27,8 +28,11 @@ def synthetic_people(cfg: TrainConfig) -> list[LabelledImage]:
         if not (folder / "truth" / "truth.json").is_file():
             raise ConfigError(f"synthetic room {folder} is missing: `vtdslam train-msnet` renders it (or `vtdslam "
                               f"synth {folder} --frames {cfg.synth_frames} --people {cfg.synth_people} --seed {seed}`)")
+        camera = load_camera_file(folder)
+        if camera is None:
+            raise ConfigError(f"synthetic room {folder} has no camera.json: render it again")
         for i in range(0, cfg.synth_frames, max(cfg.synth_stride, 1)):
             name = f"{i:06d}.png"
-            items.append(LabelledImage(folder / "rgb" / name, (480, 640), mask=folder / "truth" / "masks" / name,
-                                       mask_label="person", mask_min=1))
+            items.append(LabelledImage(folder / "rgb" / name, (camera.height, camera.width),
+                                       mask=folder / "truth" / "masks" / name, mask_label="person", mask_min=1))
     return items
