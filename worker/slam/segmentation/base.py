@@ -114,8 +114,9 @@ class SegmenterConfig:
     """The potentially dynamic classes, by class name or group (`person`, `animal`, `vehicle`, `object`; see
     `segmentation.classes.DYNAMIC_GROUPS`), resolved against the backend's classes (`resolve_for_segmenter`: a
     class it does not know is not covered; a name that is neither a group, a VOC nor a COCO class is an error).
-    None keeps the backend's default: the checkpoint's own (the shipped person/chair MSNET: person; a 21-class
-    one: `DEFAULT_DYNAMIC`, every group), the teacher's person and chair (with `full_voc`: `DEFAULT_DYNAMIC`)."""
+    None keeps the backend's default: the checkpoint's own (the shipped 21-class MSNET: `DEFAULT_DYNAMIC`, the
+    person, animal and vehicle groups; the earlier person/chair one: person), the teacher's person and chair (with
+    `full_voc`: `DEFAULT_DYNAMIC`)."""
     full_voc: bool = False
     """tflite-teacher: all 21 PASCAL VOC classes of a DeepLabV3 model instead of background/person/chair (the
     others counted as background); its default potentially dynamic classes are then `DEFAULT_DYNAMIC`."""

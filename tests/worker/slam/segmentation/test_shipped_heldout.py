@@ -63,8 +63,8 @@ def test_issue_targets(scores: dict[str, PersonScores], name: str, field: str, f
 
 @pytest.mark.realdata
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 57 target: the kitchen's real chairs are potentially dynamic")
 def test_marked_area_on_people_free_frames(scores: dict[str, PersonScores]) -> None:
-    """Target <= 1 % of pixels marked potentially dynamic (goal 0.2 %): 1.51 %, the kitchen's real chairs (the
-    person checkpoint before it, person only: 0.01 %). Frames 900-999 are held out of every recipe's backgrounds."""
-    assert scores["7scenes-empty"].marked <= 0.01
+    """Issue 57: <= 1 % of pixels marked potentially dynamic (goal 0.2 %). 0.00 % since chairs are no longer
+    potentially dynamic by default (1.52 % before, every pixel of it the kitchen's real chairs). Frames 900-999 are
+    held out of every recipe's backgrounds."""
+    assert scores["7scenes-empty"].marked <= 0.002
