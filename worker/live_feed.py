@@ -4,8 +4,8 @@
 ``max_behind`` wait (then the newest ``max_behind``; the older ones are dropped and counted). :class:`LiveFeed` takes
 frames on its own thread the moment the run has room for one more (at most ``ahead`` frames taken ahead of the one
 the run steps) and hands them over decoded, with their stages' `prepare` work already queued: while the pipeline
-thread tracks frame k, frames k+1 and k+2 are decoded and segmented as soon as they have arrived, not only once
-frame k is done.
+thread tracks frame k, the next frames are decoded and segmented as soon as they have arrived, not only once frame
+k is done.
 Frames are taken in arrival order and the drop rule is applied when a frame is taken, as the pipeline thread would.
 """
 from __future__ import annotations
