@@ -14,10 +14,8 @@ from fastapi.testclient import TestClient
 
 from backend.api.pages import include_dashboard
 from backend.app import create_app
-from storage.db import make_engine, make_session_factory
-from storage.models import JobStatus
-from storage.repositories import jobs, metrics
 from storage.settings import Settings, get_settings
+from tests.backend.api.conftest import finish_with_metrics
 from tests.backend.api.data import tar_gz, write_sequence
 from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
 
@@ -46,12 +44,7 @@ def finished_job(client: TestClient, settings: Settings, tmp_path: Path, blob: d
     assert r.status_code == 201, r.text
     batch = client.post("/api/v1/batches", json={"sequence_ids": [r.json()["id"]], "presets": ["full"]}).json()
     job_id = batch["jobs"][0]["id"]
-    engine = make_engine(settings)
-    with make_session_factory(engine)() as s:
-        jobs.claim(s, job_id, "w")
-        metrics.save_run_metrics(s, job_id, blob)
-        jobs.finish(s, job_id, JobStatus.SUCCEEDED)
-    engine.dispose()
+    finish_with_metrics(settings, {job_id: blob})
     return job_id, batch["id"]
 
 

@@ -8,6 +8,9 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
+from storage.db import make_engine, make_session_factory
+from storage.models import JobStatus
+from storage.repositories import jobs, metrics
 from storage.settings import Settings, get_settings
 from tests.backend.api.data import tar_gz, write_sequence
 
@@ -63,6 +66,17 @@ def upload(client: TestClient, data: bytes, *, filename: str = "seq.tgz", camera
         form["allow_duplicate"] = "true"
     return client.post("/api/v1/sequences", files={"file": (filename, data, "application/gzip")},
                        data=form, headers=headers or {})
+
+
+def finish_with_metrics(settings: Settings, runs: dict[str, dict]) -> None:
+    """What a worker leaves in the database for each job id of `runs`: claimed, its run metrics saved, succeeded."""
+    engine = make_engine(settings)
+    with make_session_factory(engine)() as s:
+        for job_id, blob in runs.items():
+            jobs.claim(s, job_id, "w")
+            metrics.save_run_metrics(s, job_id, blob)
+            jobs.finish(s, job_id, JobStatus.SUCCEEDED)
+    engine.dispose()
 
 
 def leftovers(settings: Settings) -> list[str]:

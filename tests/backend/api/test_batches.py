@@ -6,10 +6,7 @@ import io
 
 import pytest
 
-from storage.db import make_engine, make_session_factory
-from storage.models import JobStatus
-from storage.repositories import jobs, metrics
-from tests.backend.api.conftest import upload
+from tests.backend.api.conftest import finish_with_metrics, upload
 from tests.backend.api.data import tar_gz, write_sequence
 
 
@@ -25,13 +22,8 @@ def test_create_get_and_table(client, settings, queue, seqs):
     assert batch["status"] == "queued" and batch["counts"] == {"queued": 2} and len(batch["jobs"]) == 2
     assert sorted(queue.ids) == sorted(j["id"] for j in batch["jobs"])
     first = batch["jobs"][0]["id"]
-    engine = make_engine(settings)
-    with make_session_factory(engine)() as s:
-        jobs.claim(s, first, "w")
-        metrics.save_run_metrics(s, first, {"ate": {"rmse": 0.012}, "rpe": {"trans": {"rmse": 0.004},
-                                                                           "rot": {"rmse": 0.25}}, "fps": 22.5})
-        jobs.finish(s, first, JobStatus.SUCCEEDED)
-    engine.dispose()
+    finish_with_metrics(settings, {first: {"ate": {"rmse": 0.012}, "rpe": {"trans": {"rmse": 0.004},
+                                                                         "rot": {"rmse": 0.25}}, "fps": 22.5}})
     got = client.get(f"/api/v1/batches/{batch['id']}").json()
     assert got["status"] == "running" and got["counts"] == {"succeeded": 1, "queued": 1}
     table = client.get(f"/api/v1/batches/{batch['id']}/table").json()
@@ -78,18 +70,12 @@ def test_named_batch_and_truth_scores_in_the_table(client, settings, seqs):
     assert batch["name"] == "truth check"
     assert [b["name"] for b in client.get("/api/v1/batches").json()["items"]] == ["truth check"]
     full, orb = (j["id"] for j in batch["jobs"])
-    engine = make_engine(settings)
-    with make_session_factory(engine)() as s:
-        for job_id, blob in [
-            (full, {"ate": {"rmse": 0.01}, "relocalisations": 2,
-                    "culling": {"truth": {"mask_iou": 0.61, "feature_precision": 0.9, "feature_recall": 0.4}},
-                    "restoration": {"truth": {"restoration_psnr": 24.5}}}),
-            (orb, {"ate": {"rmse": 0.03}, "relocalisations": 0}),
-        ]:
-            jobs.claim(s, job_id, "w")
-            metrics.save_run_metrics(s, job_id, blob)
-            jobs.finish(s, job_id, JobStatus.SUCCEEDED)
-    engine.dispose()
+    finish_with_metrics(settings, {
+        full: {"ate": {"rmse": 0.01}, "relocalisations": 2,
+               "culling": {"truth": {"mask_iou": 0.61, "feature_precision": 0.9, "feature_recall": 0.4}},
+               "restoration": {"truth": {"restoration_psnr": 24.5}}},
+        orb: {"ate": {"rmse": 0.03}, "relocalisations": 0},
+    })
     table = {r["preset"]: r for r in client.get(f"/api/v1/batches/{batch['id']}/table").json()}
     assert (table["full"]["mask_iou"], table["full"]["feature_precision"], table["full"]["feature_recall"],
             table["full"]["restoration_psnr"], table["full"]["relocalisations"]) == (0.61, 0.9, 0.4, 24.5, 2)
@@ -111,12 +97,7 @@ def test_marker_ground_truth_is_labelled_in_the_table_and_csv(client, settings, 
             "ate_corrected_against": corrected, "rpe_against": corrected, "ate_corrected": {"rmse": 0.0164},
             "rpe_frame": {"mode": "fixed-frames", "delta_frames": 1, "trans": {"rmse": 0.0117},
                           "rot_deg": {"rmse": 0.366}}}
-    engine = make_engine(settings)
-    with make_session_factory(engine)() as s:
-        jobs.claim(s, job_id, "w")
-        metrics.save_run_metrics(s, job_id, blob)
-        jobs.finish(s, job_id, JobStatus.SUCCEEDED)
-    engine.dispose()
+    finish_with_metrics(settings, {job_id: blob})
     row = client.get(f"/api/v1/batches/{batch['id']}/table").json()[0]
     assert (row["ate_rmse"], row["ate_corrected_rmse"], row["rpe_trans_rmse"], row["rpe_frame_trans_rmse"],
             row["rpe_frame_rot_rmse"]) == (0.016, 0.0164, 0.0207, 0.0117, 0.366)
