@@ -1,6 +1,6 @@
 """The paper's ablation on dynamic sequences: presets side by side, with the truth-based scores of each stage.
 
-    .venv/bin/python bench/bench_dynamic.py --sequence DIR:CAMERA [--sequence ...] [--presets a,b] \
+    .venv/bin/python bench/bench_dynamic.py --sequence DIR[:CAMERA] [--sequence ...] [--presets a,b] \
         [--max-frames N] [--config JSON] [--summary] [--teacher TFLITE] [--starts 0,2,4,6]
     .venv/bin/python bench/bench_dynamic.py --table tum-walking|bonn-crowd --data DIR [...]
 
@@ -40,8 +40,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from sequence_spec import camera_of, split_spec  # noqa: E402  (bench/, the script's own folder)
+
 from cli.fetch.catalog import TABLES, table_sequences  # noqa: E402
-from worker.slam.camera import parse_camera  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.pipeline import run_pipeline  # noqa: E402
 from worker.slam.presets import get_preset  # noqa: E402
@@ -60,11 +61,11 @@ def _fmt(v, nd=3, scale=1.0):
     return "–" if v is None else f"{v * scale:.{nd}f}"
 
 
-def row(seq_dir: str, camera: str, preset: str, max_frames: int | None, overrides: dict | None,
+def row(seq_dir: str, camera: str | None, preset: str, max_frames: int | None, overrides: dict | None,
         label: str | None = None, name: str | None = None, extra: dict | None = None, start: int = 0) -> dict:
     """One bench row; `label` names the row instead of the preset, `name` the sequence instead of its folder,
     `extra` overrides applied after `overrides` (a reference's own settings), `start` the first frame."""
-    seq = Sequence(seq_dir, parse_camera(camera))
+    seq = Sequence(seq_dir, camera_of(camera))
     config = get_preset(preset, overrides)
     if extra:
         config = config.with_overrides(extra)
@@ -107,7 +108,8 @@ def _guided_cell(cull: dict) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sequence", action="append", default=[], help="DIR:CAMERA")
+    ap.add_argument("--sequence", action="append", default=[],
+                    help="DIR[:CAMERA]: CAMERA a preset or JSON; left out, the folder's camera.json")
     ap.add_argument("--table", default=None, choices=sorted(TABLES),
                     help="a named table: its sequences as `vtdslam fetch` unpacked them into --data")
     ap.add_argument("--data", default=None, metavar="DIR", help="where `vtdslam fetch` put the --table's sequences")
@@ -126,7 +128,7 @@ def main() -> None:
     if args.table:
         args.sequence += table_specs(args.table, args.data or ap.error("--table needs --data DIR"))
     if not args.sequence:
-        ap.error("give --sequence DIR:CAMERA or --table NAME --data DIR")
+        ap.error("give --sequence DIR[:CAMERA] or --table NAME --data DIR")
     overrides = json.loads(args.config) if args.config else None
     try:
         starts = [int(k) for k in args.starts.split(",")]
@@ -143,7 +145,7 @@ def main() -> None:
     print("|" + "---|" * 26)
     rows = []
     for spec in args.sequence:
-        seq_dir, _, camera = spec.rpartition(":")
+        seq_dir, camera = split_spec(spec)
         with tempfile.TemporaryDirectory() as tmp:
             runs: list[tuple[str, str, dict | None, str | None]] = [
                 (seq_dir, preset, None, None) for preset in args.presets.split(",")]
@@ -152,8 +154,9 @@ def main() -> None:
                          for preset in args.presets.split(",") if "segmentation" in get_preset(preset).stages]
             truth = load_truth(seq_dir) if args.references else None
             if truth is not None:
-                if truth.layout.depth_scale != parse_camera(camera).depth_scale:
-                    raise SystemExit(f"{seq_dir}: the truth's depth scale is not the camera's {camera!r}")
+                if truth.layout.depth_scale != Sequence(seq_dir, camera_of(camera)).camera.depth_scale:
+                    raise SystemExit(f"{seq_dir}: the truth's depth scale is not its camera's "
+                                     f"({camera or 'camera.json'})")
                 bg = str(write_background_sequence(seq_dir, Path(tmp) / "bg"))
                 runs += [(bg, preset, extra, label) for label, (preset, extra) in REFERENCES.items()]
             for start in starts:

@@ -30,7 +30,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # this checkout's code, not the installed one's (a worktree measuring "before")
 
-from worker.slam.camera import parse_camera  # noqa: E402
+from sequence_spec import camera_of, split_spec  # noqa: E402  (bench/, the script's own folder)
+
 from worker.slam.inpainting.references import Candidate, ReferenceSelectionConfig, select_references  # noqa: E402
 from worker.slam.inpainting.refine import PoseRefinementConfig  # noqa: E402
 from worker.slam.inpainting.restore import ReferenceView, RestorationConfig, restore_frame  # noqa: E402
@@ -38,9 +39,9 @@ from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.truth import load_truth, restoration_psnr  # noqa: E402
 
 
-def bench_sequence(root: Path, camera: str, n_frames: int, both_sided: bool, config: RestorationConfig,
+def bench_sequence(root: Path, camera: str | None, n_frames: int, both_sided: bool, config: RestorationConfig,
                    sel_cfg: ReferenceSelectionConfig = ReferenceSelectionConfig()) -> dict:
-    seq = Sequence(root, parse_camera(camera))
+    seq = Sequence(root, camera_of(camera))
     truth = load_truth(root)
     if truth is None:
         raise SystemExit(f"{root} has no truth/ folder")
@@ -97,12 +98,12 @@ def bench_sequence(root: Path, camera: str, n_frames: int, both_sided: bool, con
     return means | depth | {"frames": len(picks)}
 
 
-def bench_speed(root: Path, camera: str, config: RestorationConfig, index: int = 60) -> None:
+def bench_speed(root: Path, camera: str | None, config: RestorationConfig, index: int = 60) -> None:
     """Time per frame against hole size: a person-like ellipse at the image centre of one frame, restored with
     three past references (geometry covers what they see) and with none (PatchMatch from the frame itself, the
     worst case). CPU time of the process (numba runs on one thread), so the figures hold on a loaded machine
     too; PSNR against the true background inside the hole."""
-    seq, truth = Sequence(root, parse_camera(camera)), load_truth(root)
+    seq, truth = Sequence(root, camera_of(camera)), load_truth(root)
     if truth is None:
         raise SystemExit(f"{root} has no truth/ folder")
     gt_idx, gt_poses = seq.groundtruth_for_frames()
@@ -137,9 +138,9 @@ def bench_speed(root: Path, camera: str, config: RestorationConfig, index: int =
 def bench_static(spec: str, fills: list[str], every: int, max_frames: int | None) -> None:
     """Real static frames are their own truth: person-like ellipses (5, 15, 25 % of the image, left, centre,
     right) restored with no reference, so every hole pixel is filled by the unseen-pixel fill; `spec` is
-    SEQ_DIR:CAMERA. Mean whole-hole PSNR and median CPU ms per fill."""
-    root, _, camera = spec.rpartition(":")
-    seq = Sequence(Path(root), parse_camera(camera))
+    SEQ_DIR[:CAMERA]. Mean whole-hole PSNR and median CPU ms per fill."""
+    root, camera = split_spec(spec)
+    seq = Sequence(Path(root), camera_of(camera))
     n = min(len(seq), max_frames) if max_frames else len(seq)
     frames = range(every // 2, n, every)
     res: dict[tuple[float, str], list[tuple[float, float]]] = {}
@@ -176,7 +177,7 @@ def _refinement(value: str) -> PoseRefinementConfig:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("sequences", nargs="*", type=Path)
-    ap.add_argument("--static", action="append", default=[], metavar="SEQ_DIR:CAMERA",
+    ap.add_argument("--static", action="append", default=[], metavar="SEQ_DIR[:CAMERA]",
                     help="also fill artificial holes in a real static sequence's frames with no references "
                          "(the frame is the truth); repeatable")
     ap.add_argument("--static-every", type=int, default=100, help="every n-th frame of a --static sequence")
@@ -203,7 +204,7 @@ def main() -> None:
     ap.add_argument("--unseen-depth", default="border", help="depth of pixels no reference sees: border|none")
     args = ap.parse_args()
     if not args.sequences and not args.static:
-        ap.error("give sequences with truth, --static SEQ_DIR:CAMERA, or both")
+        ap.error("give sequences with truth, --static SEQ_DIR[:CAMERA], or both")
     fills = args.unseen_fill.split(",")
     for spec in args.static:
         bench_static(spec, fills, args.static_every, args.static_max_frames)

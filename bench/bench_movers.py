@@ -27,8 +27,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from sequence_spec import camera_of, split_spec  # noqa: E402  (bench/, the script's own folder)
+
 from worker.slam.augment.instance_scores import InstanceScoreStage, InstanceTruth  # noqa: E402
-from worker.slam.camera import parse_camera  # noqa: E402
 from worker.slam.catalog import shipped_catalog  # noqa: E402
 from worker.slam.io.sequence import Sequence  # noqa: E402
 from worker.slam.pipeline import run_pipeline  # noqa: E402
@@ -63,10 +64,10 @@ def oracle_copy(seq_dir: str, out: Path) -> str:
     return str(out)
 
 
-def run_row(run_dir: str, camera: str, preset: str, max_frames: int | None, overrides: dict | None,
+def run_row(run_dir: str, camera: str | None, preset: str, max_frames: int | None, overrides: dict | None,
             instances: InstanceTruth | None) -> dict:
     """One run of `preset` on `run_dir`, with the instance scores appended when `instances` is given."""
-    seq = Sequence(run_dir, parse_camera(camera))
+    seq = Sequence(run_dir, camera_of(camera))
     config = get_preset(preset, overrides)
     seq[0]  # fixes the camera size before the stages are built (as run_pipeline does)
     stages = shipped_catalog().build_stages(config, seq.camera)
@@ -84,9 +85,9 @@ def run_row(run_dir: str, camera: str, preset: str, max_frames: int | None, over
 
 def sequence_rows(spec: str, presets: list[str], max_frames: int | None, overrides: dict | None,
                   oracle: bool = False, reference: bool = True) -> list[dict]:
-    """The preset rows and the mover-free row of one `DIR:CAMERA` (and the class oracle's, with per-instance
+    """The preset rows and the mover-free row of one `DIR[:CAMERA]` (and the class oracle's, with per-instance
     truth and `oracle`)."""
-    seq_dir, _, camera = spec.rpartition(":")
+    seq_dir, camera = split_spec(spec)
     truth = load_truth(seq_dir)
     if truth is None:
         raise SystemExit(f"{seq_dir}: no truth/ (make it with `vtdslam augment`)")
@@ -176,7 +177,7 @@ def _mean(values: list) -> float | None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sequence", action="append", default=[], help="DIR:CAMERA of an augmented sequence")
+    ap.add_argument("--sequence", action="append", default=[], help="DIR[:CAMERA] of an augmented sequence")
     ap.add_argument("--presets", default="orb-only,geometry-only,no-restoration")
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--config", default=None, help="JSON overrides applied to every run")
@@ -197,7 +198,7 @@ def main() -> None:
         print_summary(rows)
         return
     if not args.sequence:
-        ap.error("give --sequence DIR:CAMERA or --from-json FILE")
+        ap.error("give --sequence DIR[:CAMERA] or --from-json FILE")
     overrides = json.loads(args.config) if args.config else None
     print_header()
     rows = []

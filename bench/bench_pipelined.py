@@ -25,6 +25,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from bench_realtime import _in_child, _shared, _synth  # noqa: E402
+from sequence_spec import split_spec  # noqa: E402
 
 VARIANTS: dict[str, tuple[dict[str, Any], bool]] = {
     # name: (config overrides, prepare_ahead)
@@ -34,16 +35,17 @@ VARIANTS: dict[str, tuple[dict[str, Any], bool]] = {
 OUTPUTS = ("trajectory.txt", "keyframes.txt", "map.ply")
 
 
-def run_variant(seq_dir: str, camera: str, preset: str, overrides: dict, prepare_ahead: bool, max_frames: int,
+def run_variant(seq_dir: str, camera: str | None, preset: str, overrides: dict, prepare_ahead: bool, max_frames: int,
                 out: str) -> dict:
     """Child process: one pipeline run writing its outputs to `out`; its metrics."""
-    from worker.slam.camera import parse_camera
+    from sequence_spec import camera_of
+
     from worker.slam.io.sequence import Sequence
     from worker.slam.pipeline import run_pipeline
     from worker.slam.presets import get_preset
 
     cfg = get_preset(preset, overrides if preset != "orb-only" else None)
-    res = run_pipeline(Sequence(seq_dir, parse_camera(camera)), cfg, out, max_frames=max_frames,
+    res = run_pipeline(Sequence(seq_dir, camera_of(camera)), cfg, out, max_frames=max_frames,
                        prepare_ahead=prepare_ahead)
     return res.metrics
 
@@ -54,7 +56,7 @@ def _f(x: float | None, nd: int = 2) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
-    ap.add_argument("--sequence", action="append", help="DIR:CAMERA (default: bonn_crowd_dev:bonn from "
+    ap.add_argument("--sequence", action="append", help="DIR[:CAMERA] (default: bonn_crowd_dev:bonn from "
                     "../shared and the synthetic room)")
     ap.add_argument("--presets", default="no-restoration,full")
     ap.add_argument("--max-frames", type=int, default=150)
@@ -71,7 +73,7 @@ def main() -> None:
         if not args.no_synth:
             seqs.append(_synth(work, args.max_frames))
         for spec in seqs:
-            seq_dir, _, camera = spec.rpartition(":")
+            seq_dir, camera = split_spec(spec)
             name = Path(seq_dir).name
             for rep in range(args.reps):
                 load = os.getloadavg()[0]

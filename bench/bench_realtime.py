@@ -41,6 +41,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from sequence_spec import split_spec  # noqa: E402  (bench/, the script's own folder)
+
 PRESETS = ("orb-only", "geometry-only", "no-restoration", "full")
 REFERENCE = "orb-only"
 ORBSLAM3 = "ORB-SLAM3 (RGB-D)"
@@ -67,14 +69,15 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def run_preset(seq_dir: str, camera: str, preset: str, max_frames: int | None, read_ahead: int) -> dict:
+def run_preset(seq_dir: str, camera: str | None, preset: str, max_frames: int | None, read_ahead: int) -> dict:
     """Child process: one pipeline run (no outputs written); its metrics with this process's peak RSS."""
-    from worker.slam.camera import parse_camera
+    from sequence_spec import camera_of
+
     from worker.slam.io.sequence import Sequence
     from worker.slam.pipeline import run_pipeline
     from worker.slam.presets import get_preset
 
-    seq = Sequence(seq_dir, parse_camera(camera))
+    seq = Sequence(seq_dir, camera_of(camera))
     res = run_pipeline(seq, get_preset(preset), None, max_frames=max_frames, read_ahead=read_ahead)
     m = dict(res.metrics)
     m["peak_rss_mb"] = round(_peak_rss_mb(), 1)
@@ -88,14 +91,14 @@ def run_orbslam3(seq_dir: str, camera: str, settings: str, vocab: str, max_frame
     os.dup2(2, 1)  # ORB-SLAM3 prints its progress on stdout: keep the parent's tables clean
     import cv2
     import pyorbslam3
+    from sequence_spec import camera_of
 
-    from worker.slam.camera import parse_camera
     from worker.slam.errors import EvaluationError
     from worker.slam.evaluation.metrics import evaluate
     from worker.slam.io.sequence import Sequence
     from worker.slam.io.trajectory import read_tum_trajectory
 
-    seq = Sequence(seq_dir, parse_camera(camera))
+    seq = Sequence(seq_dir, camera_of(camera))
     refs = seq.frames[:max_frames] if max_frames is not None else seq.frames
     t0 = time.perf_counter()
     slam = pyorbslam3.Slam(vocab, settings, pyorbslam3.Sensor.RGBD, use_viewer=False)
@@ -164,13 +167,14 @@ def _vocabulary(models: Path) -> Path | str:
     return dst
 
 
-def _settings(models: Path, seq_dir: str, camera: str, work: Path) -> tuple[Path, str] | str:
+def _settings(models: Path, seq_dir: str, camera: str | None, work: Path) -> tuple[Path, str] | str:
     """(settings yaml, where it came from) for the sequence's camera, or why there are none."""
-    from worker.slam.camera import parse_camera
+    from sequence_spec import camera_of
+
     from worker.slam.io.sequence import Sequence
 
     shipped = models / f"settings_{camera}.yaml"
-    seq = Sequence(seq_dir, parse_camera(camera))
+    seq = Sequence(seq_dir, camera_of(camera))
     if seq.camera_source == "given" and shipped.is_file():
         return shipped, shipped.name
     template = models / "settings_bonn.yaml"
@@ -197,7 +201,7 @@ def _orbslam3_unavailable(models: Path) -> str | None:
 
 
 def _synth(work: Path, frames: int) -> str:
-    """A synthetic room with walking people, rendered by `vtdslam synth`; DIR:CAMERA."""
+    """A synthetic room with walking people, rendered by `vtdslam synth`; DIR[:CAMERA]."""
     out = work / "synthetic_room"
     cmd = [sys.executable, "-c", "import sys; from cli.main import main; sys.exit(main())", "synth", str(out),
            "--frames", str(frames)]
@@ -241,7 +245,7 @@ def main() -> None:
     doc = __doc__ or ""
     ap = argparse.ArgumentParser(description=doc.split("\n")[0])
     ap.add_argument("--sequence", action="append",
-                    help="DIR:CAMERA (default: bonn_crowd_dev:bonn and 7scenes_redkitchen:7scenes from ../shared)")
+                    help="DIR[:CAMERA] (default: bonn_crowd_dev:bonn and 7scenes_redkitchen:7scenes from ../shared)")
     ap.add_argument("--presets", default=",".join(PRESETS), help="comma-separated pipeline presets")
     ap.add_argument("--max-frames", type=int, default=None,
                     help="frames per sequence (default: all; 7-Scenes 1000; synthetic room 300)")
@@ -270,7 +274,7 @@ def main() -> None:
         if isinstance(vocab, str):
             why_not = vocab
         for spec, n in seqs:
-            seq_dir, _, camera = spec.rpartition(":")
+            seq_dir, camera = split_spec(spec)
             name = Path(seq_dir).name
             for preset in presets:
                 rows.append(_timed_row(name, preset, run_preset, seq_dir, camera, preset, n, args.read_ahead))

@@ -1,7 +1,7 @@
 """Benchmark the SLAM pipeline presets against OpenCV 5's cv2.Odometry on the same frames; print markdown.
 
     .venv/bin/python bench/bench_slam.py                       # 7-Scenes redkitchen, all frames, orb-only
-    .venv/bin/python bench/bench_slam.py --max-frames 300 --presets orb-only --sequence DIR:CAMERA
+    .venv/bin/python bench/bench_slam.py --max-frames 300 --presets orb-only --sequence DIR[:CAMERA]
 
 Every run is a separate (spawned) process, so its peak RSS is its own. Tables: accuracy and speed, mean ms
 per stage, and a check of map.ply: each dense-map point (map aligned rigidly to ground truth through the
@@ -26,6 +26,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from sequence_spec import split_spec  # noqa: E402  (bench/, the script's own folder)
+
 
 def _shared() -> Path:
     return Path(os.environ.get("VTD_SHARED_DIR", ROOT.parent / "shared")).resolve()
@@ -35,15 +37,16 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def run_preset(seq_dir: str, camera: str, preset: str, start: int, max_frames: int | None, out: str,
+def run_preset(seq_dir: str, camera: str | None, preset: str, start: int, max_frames: int | None, out: str,
                overrides: dict | None) -> dict:
     """Child process: one pipeline run; returns its metrics plus the map check."""
-    from worker.slam.camera import parse_camera
+    from sequence_spec import camera_of
+
     from worker.slam.io.sequence import Sequence
     from worker.slam.pipeline import run_pipeline
     from worker.slam.presets import get_preset
 
-    seq = Sequence(seq_dir, parse_camera(camera))
+    seq = Sequence(seq_dir, camera_of(camera))
     res = run_pipeline(seq, get_preset(preset, overrides), out, start=start, max_frames=max_frames)
     m = dict(res.metrics)
     if seq.groundtruth is not None and res.cloud is not None:
@@ -53,17 +56,17 @@ def run_preset(seq_dir: str, camera: str, preset: str, start: int, max_frames: i
     return m
 
 
-def run_odometry(seq_dir: str, camera: str, start: int, max_frames: int | None) -> dict:
+def run_odometry(seq_dir: str, camera: str | None, start: int, max_frames: int | None) -> dict:
     """Child process: cv2.Odometry (RGB + depth, frame to frame) over the same frames."""
     import cv2
+    from sequence_spec import camera_of
 
-    from worker.slam.camera import parse_camera
     from worker.slam.evaluation.groundtruth_frame import evaluate_framed
     from worker.slam.geometry.se3 import inv, orthonormalize
     from worker.slam.io.sequence import Sequence
     from worker.slam.io.trajectory import Trajectory
 
-    seq = Sequence(seq_dir, parse_camera(camera))
+    seq = Sequence(seq_dir, camera_of(camera))
     stop = len(seq) if max_frames is None else min(len(seq), start + max_frames)
     settings = cv2.OdometrySettings()
     prev, poses, stamps, fails, ms, cpu = None, [], [], 0, [], []
@@ -187,7 +190,7 @@ def _f(x, nd=4):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--sequence", action="append", help="DIR:CAMERA (default: 7-Scenes redkitchen:7scenes)")
+    ap.add_argument("--sequence", action="append", help="DIR[:CAMERA] (default: 7-Scenes redkitchen:7scenes)")
     ap.add_argument("--presets", default="orb-only", help="comma-separated pipeline presets")
     ap.add_argument("--start", type=int, default=0)
     ap.add_argument("--max-frames", type=int, default=None)
@@ -201,7 +204,7 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for spec in seqs:
-            seq_dir, _, camera = spec.rpartition(":")
+            seq_dir, camera = split_spec(spec)
             name = Path(seq_dir).name
             for preset in args.presets.split(","):
                 t0 = time.perf_counter()
